@@ -138,6 +138,18 @@ def _command(parser: argparse.ArgumentParser, given: list[str]) -> list[str]:
     return []
 
 
+def _command_run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[str]:
+    """The command parsed into ``args`` with the action of its group ("data", "stats"), read from the
+    namespace: an error of `crowdmpc data stats` said "crowdmpc data:", as if of every data action, while
+    the parser's own errors name "crowdmpc data stats"."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            name = getattr(args, action.dest, None)
+            if name in action.choices:
+                return [name, *_command_run(action.choices[name], args)]
+    return []
+
+
 def _plugin_after_command(prog: str, given: list[str]) -> bool:
     """Whether ``--plugin`` comes after the command of subparser ``prog`` ("crowdmpc train") in ``given``."""
     command = prog.split()[-1]
@@ -273,32 +285,33 @@ def _main(argv: list[str] | None) -> int:
         parser.error(f"--config and --set apply to simulate, sweep and config, not {args.command}")
     from pipelines.loop.interrupt import stop_status, terminate_as_interrupt
 
+    command = " ".join(_command_run(parser, args))
     try:
         with terminate_as_interrupt():  # `kill`, `timeout`: what Ctrl-C keeps is kept (finished episodes)
             return int(args.func(args) or 0)
     except KeyboardInterrupt:  # first: the clause below may import its errors' packages
-        print(f"crowdmpc {args.command}: interrupted", file=sys.stderr)
+        print(f"crowdmpc {command}: interrupted", file=sys.stderr)
         return stop_status()
     except (EpisodeFailed, CloseFailed) as exc:  # before the user errors they are among
         # a refusal of the --record folder is one of the user's input, told alone: the file it names is the
         # episode refused, where the seed of the episode that met it is the first's (which checks every
         # planned file) and no episode to rerun
         refused = isinstance(exc.__cause__, RecordingRefused)
-        print(f"crowdmpc {args.command}: error: {exc.__cause__ if refused else exc}", file=sys.stderr)
+        print(f"crowdmpc {command}: error: {exc.__cause__ if refused else exc}", file=sys.stderr)
         return 2 if refused else EPISODES_RAISED
     except user_errors() as exc:
-        print(f"crowdmpc {args.command}: error: {exc}", file=sys.stderr)
+        print(f"crowdmpc {command}: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:
         if (refusal := storage_refusal(exc)) is None:  # not a full disk: a bug, with its traceback
             raise
-        print(f"crowdmpc {args.command}: error: {refusal}", file=sys.stderr)
+        print(f"crowdmpc {command}: error: {refusal}", file=sys.stderr)
         return 2
     except Exception as exc:
         if interrupt_behind(exc) is None:  # a bug: its traceback
             raise
         # Ctrl-C inside a CasADi call outside any solve, handed back as a SystemError caused by it
-        print(f"crowdmpc {args.command}: interrupted", file=sys.stderr)
+        print(f"crowdmpc {command}: interrupted", file=sys.stderr)
         return stop_status()
 
 

@@ -184,7 +184,7 @@ def test_an_interrupted_prepare_leaves_no_old_manifest_and_is_rerun(tmp_path, ca
         _stop_on_second_move(monkeypatch)
         if again is argv:
             shutil.rmtree(out)
-        assert run(capsys, *again)[2].strip().splitlines()[-1] == "crowdmpc data: interrupted"
+        assert run(capsys, *again)[2].strip().splitlines()[-1] == "crowdmpc data prepare: interrupted"
         monkeypatch.undo()
         assert not (out / "manifest.json").exists()
         assert [p.name for p in tmp_path.iterdir() if ".prepare-" in p.name] == []  # the staging is gone
@@ -502,7 +502,7 @@ def test_an_interrupted_synth_never_leaves_data_beside_another_provenance(monkey
         monkeypatch.setattr(os, "replace", stopped)
         code, _, err = run(capsys, *argv(seed, *extra))
         monkeypatch.setattr(os, "replace", real_replace)
-        assert code != 0 and err.strip().splitlines()[-1] == "crowdmpc data: interrupted"
+        assert code != 0 and err.strip().splitlines()[-1] == "crowdmpc data synth: interrupted"
         left = sorted(p.name for p in tmp_path.iterdir())
         assert left == [".s.ndjson.synth.lock", "s.synth.json"]  # no old data, no temporary
         assert json.loads(provenance.read_text())["options"]["seed"] == int(seed)
@@ -845,5 +845,7 @@ def test_data_the_disk_refuses_names_out(tmp_path, capsys, command):
     with file_size_limit(200):
         assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith(f"crowdmpc data: error: could not write {out.resolve()} (File too large)")
+    assert err[-1].startswith(
+        f"crowdmpc data {command}: error: could not write {out.resolve()} (File too large)"
+    )
     assert not out.exists() or not any(out.iterdir())

@@ -42,6 +42,30 @@ def _one_error_line(capsys, command: str) -> str:
     return lines[0]
 
 
+@pytest.mark.parametrize(
+    ("argv", "command"),
+    [
+        (["data", "stats", "{d}/missing.ndjson"], "data stats"),
+        (["zoo", "--dir", "{d}", "show", "nope"], "zoo show"),
+        (["config", "show", "--set", "nope.key=1"], "config show"),
+    ],
+)
+def test_an_error_of_a_commands_action_names_the_action(tmp_path, capsys, argv, command):
+    """`crowdmpc data stats missing.ndjson` said "crowdmpc data: error: ...", as if of every data action,
+    where argparse's own errors of that action name "crowdmpc data stats"."""
+    assert main([a.format(d=tmp_path) for a in argv]) == 2
+    _one_error_line(capsys, command)
+
+
+def test_an_interrupted_action_names_the_action(monkeypatch, capsys):
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("pipelines.commands.data.run_stats", interrupted)
+    assert main(["data", "stats", "x.ndjson"]) == 130
+    assert capsys.readouterr().err == "crowdmpc data stats: interrupted\n"
+
+
 # ----------------------------------------------------------------------------------------------------------
 # 1. Parser errors: one line and a pointer to --help, exit code 2
 # ----------------------------------------------------------------------------------------------------------
@@ -225,7 +249,7 @@ def test_a_name_whose_temporary_name_is_too_long_is_refused_before_the_work(tmp_
     data synth and data prepare ended in an OSError traceback. A folder written into is not staged beside."""
     out = tmp_path / ("a" * 236 + ".json")
     assert main([*argv, str(out)]) == 2
-    line = _one_error_line(capsys, argv[0])
+    line = _one_error_line(capsys, " ".join(argv[: 2 if argv[0] == "data" else 1]))
     # each output's own room: replace_file's +15, data prepare's +21, data synth's +33 (the next test)
     most = {"simulate": 240, "prepare": 234, "synth": 222}[argv[1] if argv[0] == "data" else argv[0]]
     assert line.endswith(
@@ -307,7 +331,7 @@ def test_data_synth_leaves_room_for_the_temporary_of_its_staged_data(tmp_path, c
     out = tmp_path / ("s" * 223 + ".ndjson")
     argv = ["data", "synth", "--episodes", "1", "--humans", "5", "--seed", "0", "--out", str(out)]
     assert main(argv) == 2
-    assert _one_error_line(capsys, "data").endswith(
+    assert _one_error_line(capsys, "data synth").endswith(
         f"--out {out}: not a usable path (a name of at most 222 bytes: crowdmpc writes it under a longer "
         "temporary name first)"
     )
@@ -438,7 +462,7 @@ def test_a_write_the_disk_refuses_ends_the_command_in_one_line(tmp_path, capsys)
         code = main(argv)
     assert code == 2
     line = capsys.readouterr().err.strip()
-    assert "\n" not in line and line.startswith("crowdmpc data: error: could not write"), line
+    assert "\n" not in line and line.startswith("crowdmpc data synth: error: could not write"), line
     assert line.endswith(
         "(File too large); free space (or raise the quota, or `ulimit -f`) and run the command again"
     )
@@ -579,7 +603,7 @@ def test_simulate_refuses_what_the_run_could_not_do_before_the_episodes(options,
 def test_every_output_path_is_checked_first(argv, option, a_file, capsys):
     target = a_file / "out"
     assert main([*argv, option, str(target)]) == 2
-    line = _one_error_line(capsys, argv[0])
+    line = _one_error_line(capsys, " ".join(argv[: 2 if argv[0] == "data" else 1]))
     assert line.endswith(f"{option} {target}: {a_file} is not a directory")
     assert not target.exists()
 

@@ -52,22 +52,26 @@ def test_a_config_file_nested_100_000_deep_is_one_line_naming_it(tmp_path, capsy
     path = tmp_path / "deep.toml"
     path.write_text("a = " + "[" * 100_000 + "]" * 100_000 + "\n")  # 200 kB, under the 1 MiB cap
     line = error_line(capsys, "--config", str(path), "config", "show")
-    assert line == f"crowdmpc config: error: {path}: not a config file: arrays or tables nested too deeply"
+    assert (
+        line == f"crowdmpc config show: error: {path}: not a config file: arrays or tables nested too deeply"
+    )
 
 
 def test_a_set_value_nested_past_the_recursion_limit_is_one_line_naming_it(capsys):
     line = error_line(capsys, "--set", "sweep.humans=" + "[" * 5000 + "]" * 5000, "config", "show")
     assert (
-        line
-        == "crowdmpc config: error: --set sweep.humans: the value's arrays or tables are nested too deeply"
+        line == "crowdmpc config show: error: --set sweep.humans: the value's arrays or tables are "
+        "nested too deeply"
     )
 
 
 def test_a_sweep_lists_each_crowd_size_at_most_once_and_shows_a_bad_list_short(capsys):
     line = error_line(capsys, "--set", f"sweep.humans={[5] * 51}", "config", "show")
-    assert line == "crowdmpc config: error: --set sweep.humans: must list at most 50 crowd sizes, got 51"
+    assert line == "crowdmpc config show: error: --set sweep.humans: must list at most 50 crowd sizes, got 51"
     line = error_line(capsys, "--set", "sweep.humans=" + "[" * 300 + "]" * 300, "config", "show")
-    assert line.startswith("crowdmpc config: error: --set sweep.humans: must be a list of integers, like")
+    assert line.startswith(
+        "crowdmpc config show: error: --set sweep.humans: must be a list of integers, like"
+    )
     assert line.endswith("[[[...") and len(line) < 200, line
 
 
@@ -103,14 +107,16 @@ def test_an_integer_past_a_float_or_past_pythons_digit_limit_is_one_line(item, m
     """An OverflowError (float(10**400)) and a ValueError (Python reads at most 4300 digits, TOML's 0x has no
     such limit but then no record can write it) ended config show in a traceback."""
     line = error_line(capsys, "--set", item, "config", "show")
-    assert line.startswith(f"crowdmpc config: error: {message}") and len(line) < 200, line
+    assert line.startswith(f"crowdmpc config show: error: {message}") and len(line) < 200, line
 
 
 def test_a_config_file_with_an_integer_past_pythons_digit_limit_is_one_line(tmp_path, capsys):
     path = tmp_path / "big.toml"
     path.write_text(f"[mpc]\nw_coll = 1{'0' * 5000}\n")
     line = error_line(capsys, "--config", str(path), "config", "show")
-    assert line == f"crowdmpc config: error: {path}: not a config file: an integer of more than 4300 digits"
+    assert (
+        line == f"crowdmpc config show: error: {path}: not a config file: an integer of more than 4300 digits"
+    )
 
 
 # ---- 3. and 4. counts that allocate or run for days ----------------------------------------------------
@@ -157,7 +163,7 @@ def test_data_synth_bounds_its_counts_in_the_parser(option, value, expected, tmp
 def test_a_set_item_with_a_line_break_is_refused_naming_it(item, capsys):
     line = error_line(capsys, "--set", item, "config", "show")
     assert line == (
-        f"crowdmpc config: error: --set {item!r}: a line break or control character; one "
+        f"crowdmpc config show: error: --set {item!r}: a line break or control character; one "
         "SECTION.KEY=VALUE per --set"
     )
 
@@ -177,7 +183,7 @@ def _two_configs(tmp_path: Path) -> tuple[str, str]:
 
 def test_two_config_files_before_the_command_are_refused_like_one_before_and_one_after(tmp_path, capsys):
     a, b = _two_configs(tmp_path)
-    expected = f"crowdmpc config: error: --config given twice ({a}, {b}); one config file per run"
+    expected = f"crowdmpc config show: error: --config given twice ({a}, {b}); one config file per run"
     assert error_line(capsys, "--config", a, "--config", b, "config", "show") == expected
     assert error_line(capsys, "--config", a, "config", "show", "--config", b) == expected
     assert error_line(capsys, "config", "show", "--config", a, "--config", b) == expected  # both after
@@ -188,7 +194,7 @@ def test_an_empty_config_path_is_refused_like_a_missing_file(where, capsys):
     """`--config ""` was dropped as no config at all, and the run went on with the defaults."""
     argv = ["--config", "", "config", "show"] if where == "before" else ["config", "show", "--config", ""]
     line = error_line(capsys, *argv)
-    assert line == "crowdmpc config: error: --config '': no such file (an empty path)"
+    assert line == "crowdmpc config show: error: --config '': no such file (an empty path)"
 
 
 @pytest.mark.parametrize(
@@ -198,7 +204,7 @@ def test_an_empty_config_path_is_refused_like_a_missing_file(where, capsys):
         (["simulate", "--controller", "straight", "--plot", ""], "crowdmpc simulate: error: --plot must"),
         (["simulate", "--controller", "straight", "--record", ""], "crowdmpc simulate: error: --record must"),
         (["sweep", "--experiment", "baselines", "--out", ""], "crowdmpc sweep: error: --out must"),
-        (["config", "show", "--from-sweep", ""], "crowdmpc config: error: --from-sweep must"),
+        (["config", "show", "--from-sweep", ""], "crowdmpc config show: error: --from-sweep must"),
     ],
 )
 def test_an_empty_path_option_is_refused_by_name(argv, expected, tmp_path, capsys, monkeypatch):
@@ -221,7 +227,7 @@ def test_a_config_symlink_loop_is_named_as_one(tmp_path, capsys):
     (tmp_path / "a.toml").symlink_to(tmp_path / "b.toml")
     (tmp_path / "b.toml").symlink_to(tmp_path / "a.toml")
     line = error_line(capsys, "--config", str(tmp_path / "a.toml"), "config", "show")
-    assert line == f"crowdmpc config: error: --config {tmp_path / 'a.toml'}: a symbolic-link loop"
+    assert line == f"crowdmpc config show: error: --config {tmp_path / 'a.toml'}: a symbolic-link loop"
 
 
 def test_a_data_dir_that_is_a_file_or_a_loop_says_so(tmp_path, capsys):
@@ -293,8 +299,8 @@ def test_cache_info_says_a_file_is_no_cache_directory(tmp_path, capsys, monkeypa
         f"$CROWDMPC_CACHE={tmp_path / 'file'}: {tmp_path / 'file'} is not a directory; "
         "set $CROWDMPC_CACHE to a writable directory"
     )
-    assert error_line(capsys, "cache", "info") == f"crowdmpc cache: error: {expected}"
-    assert error_line(capsys, "cache", "clear") == f"crowdmpc cache: error: {expected}"
+    assert error_line(capsys, "cache", "info") == f"crowdmpc cache info: error: {expected}"
+    assert error_line(capsys, "cache", "clear") == f"crowdmpc cache clear: error: {expected}"
 
 
 def test_evaluate_on_raw_data_refuses_an_unusable_cache_before_preparing(tmp_path, capsys, monkeypatch):

@@ -345,7 +345,7 @@ def test_an_unknown_predictor_is_refused_as_simulate_refuses_it_but_a_recorded_o
         refused = capsys.readouterr().err
         assert main(["config", "show", *given]) == 2
         out, err = capsys.readouterr()
-        assert (out, err) == ("", refused.replace("crowdmpc simulate:", "crowdmpc config:", 1))
+        assert (out, err) == ("", refused.replace("crowdmpc simulate:", "crowdmpc config show:", 1))
         assert err.count("\n") == 1 and "predictor: unknown predictor 'nosuch'; choose from [" in err
     assert main(["config", "show", "--set", 'sweep.predictors=["constant_velocity", "nosuch"]']) == 2
     assert "--set sweep.predictors: unknown predictor 'nosuch'; choose from [" in capsys.readouterr().err

@@ -37,7 +37,7 @@ def test_a_failed_synth_leaves_the_folder_it_found_as_it_was(monkeypatch, tmp_pa
     folder.mkdir()
     argv = ["data", "synth", "--out", str(folder / "s.ndjson"), "--episodes", "1", "--humans", "2"]
     code, _, err = run(capsys, *argv, "--seed", "0")
-    assert code == 130 and err.strip().splitlines()[-1] == "crowdmpc data: interrupted"
+    assert code == 130 and err.strip().splitlines()[-1] == "crowdmpc data synth: interrupted"
     assert os.listdir(folder) == []
     check_sweep_directory(folder)  # refuses nothing
     earlier = folder / ".s.ndjson.synth.lock"  # of a synth that finished

@@ -150,7 +150,7 @@ def test_cache_info_json_on_a_closed_stdout_is_one_line(json_args, monkeypatch, 
     argv = ["-m", "pipelines.cli", "cache", "info", *json_args]
     done = _run(argv, tmp_path, stdout=None, preexec_fn=lambda: os.close(1))
     assert done.returncode == 2
-    message = "crowdmpc cache: error: --json -: standard output is closed; name a file instead"
+    message = "crowdmpc cache info: error: --json -: standard output is closed; name a file instead"
     assert done.stderr.splitlines() == [message]
 
 

@@ -184,7 +184,7 @@ def test_a_user_model_may_not_take_a_shipped_name(shipped, user, pair, capsys):
     before = snapshot(shipped)
     code, _, err = cli(["zoo", "add", str(pair)], capsys)  # its own name, social_lstm_eth, is shipped
     assert code == 2 and one_line(err) == (
-        f"crowdmpc zoo: error: zoo name {NAME!r} is taken by a model of the shipped zoo {shipped}; "
+        f"crowdmpc zoo add: error: zoo name {NAME!r} is taken by a model of the shipped zoo {shipped}; "
         "pick another name (--name)"
     )
     assert not user.exists() and snapshot(shipped) == before
@@ -244,7 +244,7 @@ def test_maintainers_add_to_the_shipped_zoo_on_purpose_only(shipped, user, pair)
 def test_a_user_zoo_that_is_a_file_is_refused(user, pair, capsys):
     user.write_text("not a directory")
     code, _, err = cli(["zoo", "add", str(pair), "--name", "other"], capsys)
-    assert code == 2 and one_line(err) == f"crowdmpc zoo: error: the user zoo {user} is not a directory"
+    assert code == 2 and one_line(err) == f"crowdmpc zoo add: error: the user zoo {user} is not a directory"
 
 
 def test_the_real_shipped_zoo_is_never_written(pair, monkeypatch, capsys):
@@ -259,12 +259,12 @@ def test_the_real_shipped_zoo_is_never_written(pair, monkeypatch, capsys):
 def test_remove_refuses_what_the_user_zoo_does_not_have(shipped, user, capsys):
     code, _, err = cli(["zoo", "remove", NAME], capsys)
     assert code == 2 and one_line(err) == (
-        f"crowdmpc zoo: error: {NAME!r} is a model of the shipped zoo {shipped}, which is read-only"
+        f"crowdmpc zoo remove: error: {NAME!r} is a model of the shipped zoo {shipped}, which is read-only"
     )
     code, _, err = cli(["zoo", "remove", "nope"], capsys)
     assert (
         code == 2
-        and one_line(err) == f"crowdmpc zoo: error: the user zoo {user} has no entry 'nope'; it has []"
+        and one_line(err) == f"crowdmpc zoo remove: error: the user zoo {user} has no entry 'nope'; it has []"
     )
     code, _, err = cli(["zoo", "remove", "../x"], capsys)
     assert code == 2 and "zoo name '../x' is not allowed" in one_line(err)
@@ -321,7 +321,7 @@ def test_a_user_entry_under_a_built_in_predictors_name_is_reported_and_never_loa
     (user / zoo.MANIFEST_NAME).unlink()
     code, _, err = cli(["zoo", "show", "orca_oracle"], capsys)  # was "unknown predictor 'orca_oracle'"
     assert code == 2 and one_line(err) == (
-        "crowdmpc zoo: error: 'orca_oracle' is a built-in predictor, with no weights: no zoo holds it"
+        "crowdmpc zoo show: error: 'orca_oracle' is a built-in predictor, with no weights: no zoo holds it"
     )
 
 
@@ -331,7 +331,7 @@ def test_a_broken_user_manifest_stops_no_shipped_model(shipped, user, capsys):
     assert load_predictor(NAME).name == NAME
     code, _, err = cli(["zoo", "list"], capsys)
     assert code == 2 and one_line(err).startswith(
-        f"crowdmpc zoo: error: {user / zoo.MANIFEST_NAME}: not valid JSON"
+        f"crowdmpc zoo list: error: {user / zoo.MANIFEST_NAME}: not valid JSON"
     )
 
 
@@ -530,7 +530,8 @@ def test_adding_a_taken_name_is_refused_unless_replace(shipped, user, pair, caps
     other = retrained(pair, "other")
     code, _, err = cli(["zoo", "add", str(other), "--name", "mine"], capsys)
     assert code == 2 and one_line(err) == (
-        f"crowdmpc zoo: error: the user zoo {user} already has 'mine': sha256 {first.sha256[:12]}…, model "
+        f"crowdmpc zoo add: error: the user zoo {user} already has 'mine': sha256 "
+        f"{first.sha256[:12]}…, model "
         "social_lstm; add it with --replace to replace that entry, or under another --name"
     )
     assert snapshot(user) == before
@@ -555,13 +556,15 @@ def test_names_that_differ_only_in_case_are_taken(shipped, user, pair, capsys):
     before = snapshot(user)
     code, _, err = cli(["zoo", "add", str(retrained(pair, "other")), "--name", "Mine"], capsys)
     assert code == 2 and one_line(err) == (
-        f"crowdmpc zoo: error: the user zoo {user} already has 'mine', which is 'Mine' when case is ignored "
+        f"crowdmpc zoo add: error: the user zoo {user} already has 'mine', which is 'Mine' when "
+        f"case is ignored "
         "(their files are the same on a case-insensitive file system); add it as --name mine --replace to "
         "replace that entry, or under another --name"
     )
     code, _, err = cli(["zoo", "add", str(pair), "--name", NAME.upper()], capsys)
     assert code == 2 and one_line(err) == (
-        f"crowdmpc zoo: error: zoo name {NAME.upper()!r} is taken by a model of the shipped zoo {shipped} "
+        f"crowdmpc zoo add: error: zoo name {NAME.upper()!r} is taken by a model of the shipped zoo "
+        f"{shipped} "
         f"(as {NAME!r}: names are compared ignoring case); pick another name (--name)"
     )
     assert snapshot(user) == before and set(read_manifest(user)) == {"mine"}
@@ -606,7 +609,8 @@ def test_metrics_of_another_checkpoint_are_refused(shipped, user, pair, capsys, 
     own = "'run2'" if key == "name" else "'social_lstm'"
     code, _, err = cli(["zoo", "add", str(weights), "--metrics", str(metrics), "--name", "mine"], capsys)
     assert code == 2 and one_line(err) == (
-        f"crowdmpc zoo: error: {metrics} holds the metrics of {key} {theirs}, not of {weights} ({key} {own} "
+        f"crowdmpc zoo add: error: {metrics} holds the metrics of {key} {theirs}, not of {weights} "
+        f"({key} {own} "
         "in run2.json); pass the NAME.metrics.json `crowdmpc train` wrote beside these weights"
     )
     assert not user.exists()
@@ -623,7 +627,7 @@ def test_the_shipped_zoo_takes_no_plugin_kind(tmp_path, shipped, user, capsys):
         "without --shipped"
     )
     code, _, err = cli(["--plugin", TOY, "zoo", "add", str(weights), "--shipped"], capsys)
-    assert code == 2 and one_line(err) == f"crowdmpc zoo: error: {message}"
+    assert code == 2 and one_line(err) == f"crowdmpc zoo add: error: {message}"
     with pytest.raises(PredictorError) as refused:
         zoo_edit.add_to_zoo(weights, name="toy", protocol="p", training_data={}, metrics={}, shipped=True)
     assert str(refused.value) == message

@@ -114,7 +114,8 @@ def test_a_name_whose_files_are_the_zoos_own_is_refused(shipped, user, pair, cap
     )
     assert (code, err) == (
         2,
-        f"crowdmpc zoo: error: zoo name {name!r} is reserved: its file {name}.json would overwrite {own}, "
+        f"crowdmpc zoo add: error: zoo name {name!r} is reserved: its file {name}.json would "
+        f"overwrite {own}, "
         f"the zoo's {what} (names are compared ignoring case); pick another name",
     )
     assert snapshot(root) == before
@@ -158,7 +159,8 @@ def test_a_shipped_model_is_replaced_only_with_replace(shipped, pair, capsys):
     code, _, err = cli(["zoo", "add", str(other), "--shipped", "--name", NAME], capsys)
     assert (code, err) == (
         2,
-        f"crowdmpc zoo: error: the shipped zoo {shipped} already has {NAME!r}: sha256 {first.sha256[:12]}…, "
+        f"crowdmpc zoo add: error: the shipped zoo {shipped} already has {NAME!r}: sha256 "
+        f"{first.sha256[:12]}…, "
         "model social_lstm; add it with --replace to replace that entry, or under another --name",
     )
     assert snapshot(shipped) == before
@@ -278,7 +280,9 @@ def test_a_remove_whose_manifest_the_disk_refuses_leaves_the_entry_whole(user, c
     with file_size_limit(16):  # the manifest without "mine" is longer
         code, _, line = cli(["zoo", "remove", "mine"], capsys)
     assert (
-        code == 2 and line.startswith("crowdmpc zoo: error: could not write") and "(File too large)" in line
+        code == 2
+        and line.startswith("crowdmpc zoo remove: error: could not write")
+        and "(File too large)" in line
     )
     assert snapshot(user) == before and zoo.verify(user)[-1] == ("mine", None)
 
@@ -401,7 +405,7 @@ def test_add_never_replaces_a_file_no_entry_of_that_name_owns(user, pair, capsys
     code, _, err = cli(["zoo", "add", str(pair), "--name", "theirs", *replace], capsys)
     assert (code, err) == (
         2,
-        f"crowdmpc zoo: error: {user / f'theirs{suffix}'} is in the user zoo but the zoo has no entry "
+        f"crowdmpc zoo add: error: {user / f'theirs{suffix}'} is in the user zoo but the zoo has no entry "
         "'theirs'; adding would replace it: move that file away, or add under another --name",
     )
     assert snapshot(user) == before and zoo.zoo_names(user) == ["mine"]
@@ -413,7 +417,7 @@ def test_add_into_a_training_runs_folder_keeps_its_weights(tmp_path, pair, capsy
     run.mkdir()
     (run / "mine.pt").write_bytes(b"trained weights")
     code, _, err = cli(["zoo", "--dir", str(run), "add", str(pair), "--name", "mine"], capsys)
-    assert code == 2 and err.startswith(f"crowdmpc zoo: error: {run / 'mine.pt'} is in the user zoo but")
+    assert code == 2 and err.startswith(f"crowdmpc zoo add: error: {run / 'mine.pt'} is in the user zoo but")
     assert sorted(p.name for p in run.iterdir()) == ["mine.pt"]
     assert (run / "mine.pt").read_bytes() == b"trained weights"
 
@@ -700,11 +704,10 @@ def test_a_manifest_of_a_version_this_code_does_not_know_is_refused(user, pair, 
     path.write_text(json.dumps({**json.loads(path.read_text()), "version": version}))
     before = snapshot(user)
     message = (
-        f'crowdmpc zoo: error: {path}: zoo manifest "version" {version!r} is not one this crowdmpc reads '
-        f"(version 1){tail}"
+        f'error: {path}: zoo manifest "version" {version!r} is not one this crowdmpc reads (version 1){tail}'
     )
     for command in (["list"], ["add", str(pair), "--name", "other"], ["remove", "mine"]):
-        assert cli(["zoo", *command], capsys)[::2] == (2, message)
+        assert cli(["zoo", *command], capsys)[::2] == (2, f"crowdmpc zoo {command[0]}: {message}")
     assert snapshot(user) == before
 
 

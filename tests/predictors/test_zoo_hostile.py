@@ -99,7 +99,7 @@ def test_zoo_add_refuses_unsafe_names_before_writing(tmp_path, zoo_dir, pair, ca
     before = tree(tmp_path)
     code, line = cli(["zoo", "add", str(pair[0]), f"--name={name}"], capsys)
     assert code == 2
-    assert line.startswith("crowdmpc zoo: error: zoo name ") and "is not allowed" in line
+    assert line.startswith("crowdmpc zoo add: error: zoo name ") and "is not allowed" in line
     assert tree(tmp_path) == before  # nothing written, inside the zoo or out of it
     with pytest.raises(PredictorError, match="is not allowed"):
         zoo_edit.add_to_zoo(pair[0], name=name, protocol="p", training_data={}, metrics={}, directory=zoo_dir)
@@ -323,7 +323,7 @@ def test_bad_weights_files_are_one_line_errors_naming_the_file(pair, zoo_dir, ca
     text = str(refused.value)
     assert text.startswith(str(weights)) and message in text and "\n" not in text
     code, line = cli(["zoo", "add", str(weights)], capsys)
-    assert code == 2 and line.startswith(f"crowdmpc zoo: error: {weights}") and message in line
+    assert code == 2 and line.startswith(f"crowdmpc zoo add: error: {weights}") and message in line
     assert tree(zoo_dir) == {zoo.MANIFEST_NAME, f"{NAME}.pt", f"{NAME}.json"}  # the zoo untouched
 
 
@@ -420,7 +420,7 @@ def test_bad_configs_are_refused_naming_the_file_before_a_net_is_built(
     text = str(refused.value)
     assert text.startswith(f"{config}: ") and message in text and "\n" not in text
     code, line = cli(["zoo", "add", str(weights)], capsys)
-    assert code == 2 and line.startswith(f"crowdmpc zoo: error: {config}: ") and message in line
+    assert code == 2 and line.startswith(f"crowdmpc zoo add: error: {config}: ") and message in line
 
 
 def test_a_sparse_tensor_in_the_weights_is_refused(pair):
@@ -507,7 +507,8 @@ def test_a_manifest_that_is_not_a_regular_file_is_refused(zoo_dir, capsys, kind)
     for args in (["zoo", "verify"], ["zoo", "list"]):
         code, line = cli(args, capsys)
         assert (
-            code == 2 and line == f"crowdmpc zoo: error: {manifest}: the zoo manifest is not a regular file"
+            code == 2
+            and line == f"crowdmpc zoo {args[1]}: error: {manifest}: the zoo manifest is not a regular file"
         )
 
 
@@ -543,7 +544,7 @@ def test_a_non_utf8_manifest_is_a_one_line_error(zoo_dir, capsys):
     manifest = zoo_dir / zoo.MANIFEST_NAME
     manifest.write_bytes(b"\xff\xfe")
     code, line = cli(["zoo", "verify"], capsys)
-    assert code == 2 and line == f"crowdmpc zoo: error: {manifest}: not valid JSON (not UTF-8 text)"
+    assert code == 2 and line == f"crowdmpc zoo verify: error: {manifest}: not valid JSON (not UTF-8 text)"
 
 
 def test_zoo_list_shows_junk_metrics_as_question_marks(zoo_dir, capsys):
@@ -558,7 +559,7 @@ def test_zoo_add_refuses_a_bad_metrics_file_before_writing(tmp_path, zoo_dir, pa
     (pair[0].with_suffix(".metrics.json")).write_text(json.dumps(summary))
     before = tree(tmp_path)
     code, line = cli(["zoo", "add", str(pair[0])], capsys)
-    assert code == 2 and line.startswith("crowdmpc zoo: error: ")
+    assert code == 2 and line.startswith("crowdmpc zoo add: error: ")
     assert tree(tmp_path) == before
 
 
@@ -570,7 +571,8 @@ def test_zoo_add_names_a_metrics_path_that_is_no_file_as_such(tmp_path, zoo_dir,
     code, line = cli(["zoo", "add", str(pair[0]), "--metrics", str(metrics)], capsys)
     assert (code, line) == (
         2,
-        f"crowdmpc zoo: error: {metrics} is not a file; pass --metrics FILE (written by `crowdmpc train`)",
+        f"crowdmpc zoo add: error: {metrics} is not a file; pass --metrics FILE (written by "
+        f"`crowdmpc train`)",
     )
     assert tree(zoo_dir) == before
 
