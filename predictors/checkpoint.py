@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, BinaryIO, Final, NamedTuple
 
 from predictors.base import OBS_LEN
 from predictors.errors import CheckpointMismatch, PredictorError, short_repr
-from predictors.hashing import is_sha256
+from predictors.hashing import is_sha256, sha256_file
 
 if TYPE_CHECKING:
     import torch
@@ -67,9 +67,10 @@ def check_sha256(value: object, what: str) -> str:
     return value
 
 
-def read_capped(path: Path, limit: int, room: str) -> bytes:
+def read_capped(path: Path, limit: int, room: str, expected: str | None = None) -> bytes:
     """The bytes of ``path``, read once, or PredictorError naming it when it is not a regular file or holds
-    more than ``limit`` bytes (refused before they are read; ``room`` ends the message: "a ... may have")."""
+    more than ``limit`` bytes (refused before they are read; ``room`` ends the message: "a ... may have"),
+    CheckpointMismatch for such a file where its sha256 is ``expected``, as a file the cap lets by is."""
     if path.exists() and not path.is_file():  # a directory or a FIFO (reading one would block forever)
         raise PredictorError(f"{path}: not a regular file")
     with path.open("rb") as handle:  # a missing file: FileNotFoundError, as before
@@ -77,6 +78,10 @@ def read_capped(path: Path, limit: int, room: str) -> bytes:
         data = handle.read(limit + 1) if size <= limit else b""  # + 1: a file that grew since fstat
     size = max(size, len(data))
     if size > limit:
+        # A zoo's file fitted its cap when it was added: one over it was replaced, which the size alone did
+        # not say, nor how to mend it. Hashed in blocks, as before the cap was checked first: never held.
+        if expected is not None and (found := sha256_file(path)) != expected:
+            raise CheckpointMismatch(path, expected, found)
         raise PredictorError(f"{path}: {size} bytes, more than the {limit} {room}")
     return data
 
@@ -206,7 +211,7 @@ def read_checkpoint(
     # Each file is read once, and the bytes hashed are the bytes used: hashed, then read again, a file
     # replaced between the reads (`zoo add --replace`) built or loaded other bytes than were checked.
     what = "crowdmpc predictor config"
-    data = read_capped(config, MAX_DOCUMENT_BYTES, f"a {what} may have")
+    data = read_capped(config, MAX_DOCUMENT_BYTES, f"a {what} may have", expected_config_sha256)
     _check_bytes(config, data, expected_config_sha256)
     document = parse_document(config, data, CONFIG_FORMAT, what)
     kind = _config_kind(document, config)
@@ -283,7 +288,7 @@ def _loaded_net(
         raise PredictorError(f'{config}: "net": {exc}') from None
     expected_state = net.state_dict()
     limit = 8 * sum(t.numel() for t in expected_state.values()) + WEIGHTS_OVERHEAD_BYTES
-    data = read_capped(weights, limit, f"a state_dict of the net of {config} can take")
+    data = read_capped(weights, limit, f"a state_dict of the net of {config} can take", expected)
     sha256 = _check_bytes(weights, data, expected)
     try:
         state = load_tensors(io.BytesIO(data))

@@ -223,6 +223,21 @@ def test_a_tampered_config_with_the_recorded_sha256_is_refused(tmp_path, zoo_dir
     assert code == 2 and "the manifest expects" in line and f"{NAME}.json" in line
 
 
+@pytest.mark.parametrize("suffix", [".pt", ".json"])
+def test_a_zoo_file_replaced_by_one_over_its_size_cap_is_named_as_replaced(zoo_dir, capsys, suffix):
+    """A zoo file the manifest vouches for fitted its cap when it was added: one over it is not that file,
+    and `zoo verify` said so (restore it, or add the model again) until the caps were checked before the
+    hashes, when it said only how many bytes the file had."""
+    path = zoo_dir / f"{NAME}{suffix}"
+    with path.open("r+b") as handle:  # sparse: no 64 MiB written
+        handle.truncate(checkpoint.MAX_DOCUMENT_BYTES + 1)
+    with pytest.raises(CheckpointMismatch):
+        zoo.load_zoo(NAME)
+    assert main(["zoo", "verify"]) == 1
+    out = capsys.readouterr().out
+    assert f"{path} has sha256" in out and "the file is corrupt or was replaced" in out
+
+
 def test_load_checkpoint_checks_both_expected_hashes(pair):
     weights, config = pair
     good = {"expected_sha256": sha256(weights), "expected_config_sha256": sha256(config)}
