@@ -18,6 +18,8 @@ from pathlib import Path
 
 from predictors.errors import PredictorError
 
+_RETAKES = 8  # a removed lock is retaken at once: more than a few in a row is a file system, not a race
+
 
 @contextmanager
 def locked(path: Path, purpose: str, waiting: Callable[[], None] | None = None) -> Iterator[None]:
@@ -25,7 +27,7 @@ def locked(path: Path, purpose: str, waiting: Callable[[], None] | None = None) 
     ``waiting``. PredictorError "``path``: cannot ``purpose`` (why)" when it cannot be a lock: a symbolic
     link planted there must not make us create a file elsewhere (O_NOFOLLOW), nor a FIFO block the open for
     ever (O_NONBLOCK, then anything but a regular file refused)."""
-    while True:
+    for retake in range(_RETAKES + 1):
         fd = _open_lock(path, purpose)
         try:
             if not stat.S_ISREG(os.fstat(fd).st_mode):
@@ -39,7 +41,9 @@ def locked(path: Path, purpose: str, waiting: Callable[[], None] | None = None) 
                 ) from None
             # A failed run removes a lock it made (remove_made_folders): one opened before that and locked
             # after it is a file no newcomer opens, so both would run; such a lock is taken again, anew.
-            if _names(path, fd):
+            # A file system whose stat and fstat disagree on a file's identity (some overlay mounts' inode
+            # numbers) would retake for ever: past a few retakes the lock is held as it was before removal.
+            if _names(path, fd) or retake == _RETAKES:
                 yield
                 return
         finally:

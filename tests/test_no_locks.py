@@ -61,3 +61,22 @@ def test_calibrates_journal_that_cannot_lock_is_one_line_and_leaves_nothing(tmp_
     )
     assert str(raised.value).endswith("set $CROWDMPC_ZOO to a folder on one that does")
     assert list(Path(path.parent).iterdir()) == []
+
+
+def test_a_lock_whose_path_never_names_the_file_open_is_held_after_a_few_retakes(tmp_path, monkeypatch):
+    """A lock retaken while its path names another file (a failed run removed it) looped for ever on a file
+    system whose stat and fstat disagree on a file's identity (some overlay mounts' inode numbers)."""
+    from predictors import locking
+    from tests.waits import within
+
+    opened = []
+    real_open = locking._open_lock
+    monkeypatch.setattr(locking, "_names", lambda path, fd: False)
+    monkeypatch.setattr(
+        locking, "_open_lock", lambda path, purpose: opened.append(1) or real_open(path, purpose)
+    )
+    ran = []
+    with within(10, "locked() retaking a lock for ever"), locking.locked(tmp_path / ".lock", "test"):
+        ran.append(1)
+    assert ran == [1]
+    assert len(opened) == locking._RETAKES + 1
