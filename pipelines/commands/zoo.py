@@ -283,7 +283,8 @@ def _add(args: argparse.Namespace) -> int:
         replace=args.replace,
     )
     print(_added_line(entry, previous, args, root))
-    note = quick_check_line(entry.name, entry.training)
+    # quoted as simulate, evaluate and export name the model in the same note
+    note = quick_check_line(repr(entry.name), entry.training)
     if note is not None:  # docs/extending.md: such a model is never mistaken for a trained one
         print(note, file=sys.stderr)
     return 0

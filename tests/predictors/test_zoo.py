@@ -657,14 +657,14 @@ def test_loading_a_model_leaves_torchs_random_numbers_alone(name):
 
 def test_a_quick_check_is_added_with_a_note_and_listed_with_a_mark(shipped, user, pair, capsys):
     """docs/extending.md: a model trained with --limit-batches "is never mistaken for a trained one"; only
-    `zoo show` had said so."""
+    `zoo show` had said so. The note quotes the name, as simulate's, evaluate's and export's do."""
     metrics = pair.with_suffix(".metrics.json")
     metrics.write_text(json.dumps({"metrics": {"test": {"ade": 0.5}}, "training": {"limit_batches": 10}}))
     code, out, err = cli(["zoo", "add", str(pair), "--name", "quick"], capsys)
     assert code == 0 and out.startswith("added quick")
     assert err == (
-        "note: quick trained on 10 batches an epoch (train --limit-batches 10): a quick check, not a trained "
-        "model (zoo list: *)\n"
+        "note: 'quick' trained on 10 batches an epoch (train --limit-batches 10): a quick check, not a "
+        "trained model (zoo list: *)\n"
     )
     code, out, _ = cli(["zoo", "list"], capsys)
     lines = out.splitlines()
