@@ -9,7 +9,7 @@ import sys
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, humans_list, path_arg, write_output
-from pipelines.commands.calibrate_help import EPILOG
+from pipelines.commands.calibrate_help import EPILOG, option_helps
 from pipelines.commands.calibrate_store import (
     alphas_arg,
     evaluation_seeds_note,
@@ -92,7 +92,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--data-dir", type=path_arg, help="raw or prepared data (real; default: $CROWDMPC_DATA)")
     # closed-loop only: None unless typed, so that _check_sources can refuse one given with --source real
     default = _closed_loop_defaults()
-    p.add_argument("--episodes", type=int, help=f"closed-loop episodes (default {default['episodes']})")
+    helps = option_helps(default)
+    p.add_argument("--episodes", type=int, help=helps["episodes"])
     p.add_argument(
         "--humans",
         type=humans_list,
@@ -100,13 +101,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="closed-loop crowd sizes, cycled smallest first whatever their order "
         f"(default {','.join(map(str, default['humans']))})",
     )
-    p.add_argument("--seed", type=int, help=f"first closed-loop seed (default {default['seed']})")
-    p.add_argument(
-        "--controller", choices=("cmpc", "dmpc"), help=f"closed-loop (default {default['controller']})"
-    )
-    p.add_argument("--profile", choices=sorted(PROFILES), help=f"closed-loop (default {default['profile']})")
-    p.add_argument("--visibility", choices=VISIBILITY, help=f"closed-loop (default {default['visibility']})")
-    p.add_argument("--near", type=float, help=f"m, closed-loop humans scored (default {default['near']})")
+    p.add_argument("--seed", type=int, help=helps["seed"])
+    p.add_argument("--controller", choices=("cmpc", "dmpc"), help=helps["controller"])
+    p.add_argument("--profile", choices=sorted(PROFILES), help=helps["profile"])
+    p.add_argument("--visibility", choices=VISIBILITY, help=helps["visibility"])
+    p.add_argument("--near", type=float, metavar="M", help=helps["near"])
     p.add_argument(
         "--sensor-range",
         type=float,
@@ -129,10 +128,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="closed-loop held-out episodes plan with these margins (e.g. conformal:0.1, once stored); "
         "default none, the calibration's own conditions",
     )
-    p.add_argument("--json", type=json_path, metavar="FILE", help="blocks, coverage as JSON (-: stdout)")
+    p.add_argument("--json", type=json_path, metavar="FILE", help=helps["json"])
     p.add_argument("--dry-run", action="store_true", help="measure and print; store nothing")
     # args.progress None: a bar on a terminal only (predictors.progress)
-    p.add_argument("--no-progress", dest="progress", action="store_const", const=False, help="no bar")
+    p.add_argument(
+        "--no-progress", dest="progress", action="store_const", const=False, help=helps["no-progress"]
+    )
     p.set_defaults(func=run)
 
 

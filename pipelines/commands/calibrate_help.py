@@ -29,3 +29,18 @@ keep, and when a block replaces one made otherwise (another --controller, other 
 planning with a block made with another controller says so too. `crowdmpc zoo calibrations`
 lists each block's controller and episodes.
 """
+
+
+def option_helps(default: dict) -> dict[str, str]:
+    """The help of options whose line would not fit calibrate.py's register, each closed-loop one stating
+    ``default``'s value for it (the schema's, not a literal)."""
+    return {
+        "episodes": f"closed-loop episodes to run (default {default['episodes']})",
+        "seed": f"first closed-loop episode's seed (default {default['seed']})",
+        "controller": f"closed-loop robots' controller (default {default['controller']})",
+        "profile": f"closed-loop simulation conventions (default {default['profile']})",
+        "visibility": f"closed-loop: robots seen by the humans' ORCA (default {default['visibility']})",
+        "near": f"closed-loop: score only the humans within M m of a robot (default {default['near']})",
+        "json": "also write the blocks and coverage as JSON (-: standard output)",
+        "no-progress": "no progress bar (drawn on a terminal only)",
+    }

@@ -74,7 +74,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--plot",
         type=file_output_arg,
         metavar="PNG",
-        help="each run's change against the first per method and crowd size, with 95 %% intervals",
+        help="draw each run's change against the first per method and crowd size, with 95 %% intervals",
     )
     parser.add_argument(
         "--by-cell",

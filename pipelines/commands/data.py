@@ -117,13 +117,13 @@ def _register_synth(actions) -> None:
         "--episodes",
         required=True,
         type=counted(1, MAX_SYNTH_EPISODES),
-        help=f"number of episodes (1..{MAX_SYNTH_EPISODES})",
+        help=f"episodes to simulate (1..{MAX_SYNTH_EPISODES})",
     )
     synth.add_argument(
         "--humans", required=True, type=counted(1, MAX_HUMANS), help=f"humans per episode (1..{MAX_HUMANS})"
     )
     synth.add_argument(
-        "--seed", required=True, type=seed_arg, help="seed of episode 0 (episode i uses seed + i)"
+        "--seed", required=True, type=seed_arg, help="first episode's seed (episode i uses seed + i)"
     )
     synth.add_argument(
         "--scenario",

@@ -42,7 +42,9 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("name", help="registered predictor or model-zoo name")
-    parser.add_argument("--out", required=True, type=file_output_arg, help="output file (.casadi)")
+    parser.add_argument(
+        "--out", required=True, type=file_output_arg, help="file to write the CasADi function to (.casadi)"
+    )
     parser.add_argument(
         "--humans", type=int, default=7, help=f"number of humans N_h, 1..{MAX_HUMANS} (default 7)"
     )

@@ -89,7 +89,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("path", type=path_arg, help="an .mcap file, or a folder of them (aggregate table)")
     parser.add_argument(
-        "--plot", type=file_output_arg, metavar="PNG", help="trajectories with plans (overlay with --compare)"
+        "--plot", type=file_output_arg, metavar="PNG", help="draw paths and plans (overlay with --compare)"
     )
     parser.add_argument(
         "--times",

@@ -98,14 +98,18 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
     # the config's defaults, read from its schema: literals here could drift from them
     scenario, simulate = partial(key_default, "scenario"), partial(key_default, "simulate")
     controller, env = partial(key_default, "controller"), partial(key_default, "env")
-    parser.add_argument("--scenario", choices=sorted(SCENARIOS), help=f"default: {scenario('name')}")
-    parser.add_argument("--humans", type=int, help=f"0..{MAX_HUMANS} (default: {scenario('humans')})")
-    parser.add_argument("--robots", type=int, help=f"1..{MAX_ROBOTS} (default: {scenario('robots')})")
-    parser.add_argument("--episodes", type=int, help=f"default: {simulate('episodes')}")
-    parser.add_argument("--seed", type=int, help=f"first episode's seed (default: {simulate('seed')})")
+    where = f"where the humans start and head (default: {scenario('name')})"
+    parser.add_argument("--scenario", choices=sorted(SCENARIOS), help=where)
     parser.add_argument(
-        "--no-flocking", action="store_true", default=None, help="omega_floc = 0 (Table III, NF)"
+        "--humans", type=int, help=f"humans per episode, 0..{MAX_HUMANS} (default: {scenario('humans')})"
     )
+    parser.add_argument(
+        "--robots", type=int, help=f"robots per episode, 1..{MAX_ROBOTS} (default: {scenario('robots')})"
+    )
+    parser.add_argument("--episodes", type=int, help=f"episodes to run (default: {simulate('episodes')})")
+    parser.add_argument("--seed", type=int, help=f"first episode's seed (default: {simulate('seed')})")
+    no_floc = "plan without the flocking cost: omega_floc = 0 (Table III, NF)"
+    parser.add_argument("--no-flocking", action="store_true", default=None, help=no_floc)
     parser.add_argument("--coupling", choices=COUPLINGS, help=coupling_help(controller("coupling")))
     # what unset margins plan with (run): the schema has none, a sweep's experiment its own
     parser.add_argument("--margins", metavar="SPEC", help=margins_help(ControllerSpec.margins.mode))
@@ -126,7 +130,7 @@ def _add_output_options(parser: argparse.ArgumentParser) -> None:
         help="write the summary and per-episode records (-: standard output; fields: docs/outputs.md)",
     )
     parser.add_argument("--plot", metavar="FILE", help="draw the first episode (PNG, PDF, SVG)")
-    parser.add_argument("--record", metavar="DIR", help="one MCAP file per episode in DIR")
+    parser.add_argument("--record", metavar="DIR", help="record each episode as an MCAP file in DIR")
     parser.add_argument(
         "--record-iterations",
         action="store_true",

@@ -68,9 +68,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     # Defaults are None: an option given overrides the config (file, --set), whose defaults are these.
-    p.add_argument(
-        "--experiment", choices=sorted(EXPERIMENTS), help="required (here or as [sweep] experiment)"
-    )
+    study = "the study to run: its cells and methods (required, here or as [sweep] experiment)"
+    p.add_argument("--experiment", choices=sorted(EXPERIMENTS), help=study)
     p.add_argument(
         "--episodes-per-cell",
         type=int,
@@ -89,13 +88,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--backend",
         choices=BACKENDS,
-        help="auto (default): Ray when installed, else a local process pool; inline: in this process",
+        help="where the episodes run: auto (default): Ray when installed, else a local process pool; "
+        "inline: in this process",
     )
-    p.add_argument(
-        "--humans", type=humans_list, metavar="5,6,7", help="numbers of humans (default: the experiment's)"
-    )
+    sizes = "humans per episode, a crowd size a cell (default: the experiment's)"
+    p.add_argument("--humans", type=humans_list, metavar="5,6,7", help=sizes)
     p.add_argument("--robots", type=int, help=f"robots per episode (default {PAPER_ROBOTS})")
-    p.add_argument("--seed", type=int, help=f"base scenario seed (default {key_default('sweep', 'seed')})")
+    p.add_argument("--seed", type=int, help=f"first crowd's seed (default {key_default('sweep', 'seed')})")
     _add_method_options(p)
     _add_execution_options(p)
     add_config_options(p)

@@ -53,3 +53,26 @@ def test_an_option_with_a_default_says_it_in_its_help(path, action):
         return
     said = re.search(rf"default:? {re.escape(_shown(action.default))}\b", action.help or "")
     assert said, f"`{_id(path, action)}` defaults to {action.default!r}; its help says {action.help!r}"
+
+
+# a help that is a range or a default and nothing more: simulate's --humans "0..50 (default: 7)"
+ONLY_RANGE_OR_DEFAULT = re.compile(r"^[\d.\s]*(\.\.[\d.\s]*)?(\(default: [^)]*\))?$|^default: ")
+
+
+def _meaning(help_text: str) -> list[str]:
+    """The words of a help outside its parentheses and its "default ..." clauses: what the option is."""
+    previous = None
+    while previous != help_text:  # innermost parentheses first, so nested ones go too
+        previous, help_text = help_text, re.sub(r"\([^()]*\)", " ", help_text)
+    help_text = re.sub(r"\bdefault:? [^;]*", " ", help_text)
+    return [word for word in help_text.split() if re.search(r"[A-Za-z]", word)]
+
+
+@pytest.mark.parametrize(("path", "action"), OPTIONS)
+def test_a_help_says_what_its_option_is(path, action):
+    """simulate's --humans said "0..50 (default: 7)", --episodes "default: 1", --scenario "default:
+    circle", sweep's --experiment "required (here or as [sweep] experiment)" and calibrate's --controller
+    "closed-loop (default cmpc)": a range, a default or a condition, not what the option sets."""
+    said = action.help or ""
+    assert not ONLY_RANGE_OR_DEFAULT.match(said), f"`{_id(path, action)}`'s help {said!r} is a range/default"
+    assert len(_meaning(said)) >= 2, f"`{_id(path, action)}`'s help {said!r} does not say what it is"

@@ -369,9 +369,9 @@ def test_the_help_states_the_defaults_its_config_schema_holds(monkeypatch):
         monkeypatch.setitem(schema.SECTION_BY_NAME, name, dataclasses.replace(section, keys=keys))
     (commands,) = [a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
     helps = {action.dest: action.help for action in commands.choices["simulate"]._actions}
-    assert helps["scenario"] == "default: perpendicular"
+    assert helps["scenario"] == "where the humans start and head (default: perpendicular)"
     assert helps["humans"].endswith("(default: 5)") and helps["robots"].endswith("(default: 4)")
-    assert helps["episodes"] == "default: 3"
+    assert helps["episodes"] == "episodes to run (default: 3)"
     assert helps["seed"] == "first episode's seed (default: 11)"
 
 
@@ -414,7 +414,7 @@ def test_the_help_states_the_defaults_of_coupling_margins_conventions_and_the_sw
     assert simulate["margins"].endswith("fixed:M1,..,MH (metres) (default: conformal)")
     assert simulate["profile"] == "simulation conventions (default: v1)"
     assert simulate["visibility"] == "robots seen by the humans' ORCA (default: invisible)"
-    assert helps("sweep")["seed"] == "base scenario seed (default 11)"
+    assert helps("sweep")["seed"] == "first crowd's seed (default 11)"
     # at the shipped defaults, the words as they were
     assert paper["coupling"].startswith("ibr (default): iterative best response to the humans' predictions")
     assert "robot-human distance: none (the paper, default), conformal[" in paper["margins"]
