@@ -23,7 +23,8 @@ from pipelines.commands.train_epochs import stopped_after
 from pipelines.commands.train_resume import relocated
 from pipelines.errors import PipelineError
 from pipelines.whole_files import remove_killed_temporaries
-from predictors.checkpoint import load_tensors
+from predictors.checkpoint import load_checkpoint, load_tensors
+from predictors.errors import PredictorError
 
 
 class RunCheckpoint(ModelCheckpoint):
@@ -323,3 +324,18 @@ def check_divergence(args: argparse.Namespace, divergence: Any, best: Any) -> No
             f"to itself) or a learning rate too high (--lr {args.lr:g}) does this"
         )
     print(f"training stopped: {what}; the best epoch before it is kept", file=sys.stderr)
+
+
+def check_saved_predicts(model: str, weights: Path, out: Path) -> None:
+    """PipelineError unless the pair just saved into a staging folder (``weights``, with its .json) loads as
+    a predictor, contract check included (in eval mode and float64, where a net can break it that trained
+    finite): refused only once moved into ``out``, a pair that no command can load lay there as a trained
+    one's, after every epoch. The staging folder goes with the error, so nothing of it is left."""
+    try:
+        load_checkpoint(weights)
+    except PredictorError as exc:
+        why = str(exc).removeprefix(f"{weights.with_suffix('.json')}: ")
+        raise PipelineError(
+            f"model {model!r}: the trained net cannot be loaded as a predictor, so {weights.name} and its "
+            f".json were not written into {out} (its epochs' checkpoints are): {why}"
+        ) from None

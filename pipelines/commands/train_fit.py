@@ -230,6 +230,7 @@ def _save_best(
     import shutil
     import tempfile
 
+    from pipelines.commands.train_checkpoint import check_saved_predicts
     from pipelines.commands.train_report import trained_loss
     from predictors.base import OBS_LEN
     from predictors.checkpoint import save_checkpoint
@@ -253,6 +254,7 @@ def _save_best(
         written = save_checkpoint(
             module.net, model=args.model, name=name, out_dir=staging, obs_len=OBS_LEN, extra=extra
         )
+        check_saved_predicts(args.model, written[0], out)
         for path in written:
             path.replace(out / path.name)
     finally:

@@ -261,3 +261,12 @@ class VelocityWithoutGradients(ToyNet):
         with torch.no_grad():
             velocity = cur - prev
         return super().decode_step(h, cur - velocity, cur, neighbours)
+
+
+class NaNWhenEvaluated(ToyNet):
+    """Trains as ``ToyNet`` does, and steps NaN in eval mode, as a predictor runs it (a dropout or a norm
+    layer whose eval branch is wrong): its loss is finite, the net it leaves cannot predict."""
+
+    def decode_step(self, h, prev, cur, neighbours):
+        h, out = super().decode_step(h, prev, cur, neighbours)
+        return h, out if self.training else out * float("nan")
