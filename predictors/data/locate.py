@@ -204,6 +204,8 @@ def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool | None
             f"{' (' + what + ')' if what else ''}; re-run `crowdmpc data prepare`"
         )
     raw = raw_ewap_dir(directory)
+    if raw is None and (problem := raw_ewap_problem(directory)) is not None:
+        raise PredictorError(problem)  # which file, rather than "holds neither ..."
     if raw is None:
         raise PredictorError(
             f"{directory} holds neither prepared splits (manifest.json and train/val/test/*.ndjson from "

@@ -1,3 +1,4 @@
+import os
 import pwd
 import shutil
 from pathlib import Path
@@ -113,6 +114,19 @@ def test_raw_directory_is_prepared_once_into_the_cache(raw_root, monkeypatch, tm
 def test_directory_without_data_is_explained(tmp_path):
     with pytest.raises(PredictorError, match="neither prepared splits"):
         prepared_dir(tmp_path)
+
+
+@pytest.mark.parametrize("kind", ["fifo", "folder"])
+def test_an_obsmat_that_is_no_regular_file_is_named(raw_root, kind):
+    """`evaluate --data-dir D` with D/raw_ewap/seq_eth/obsmat.txt a FIFO said D "holds neither prepared
+    splits ... nor raw BIWI EWAP annotations", as if nothing were there."""
+    obsmat = raw_root / "raw_ewap" / "seq_eth" / "obsmat.txt"
+    obsmat.unlink()
+    os.mkfifo(obsmat) if kind == "fifo" else obsmat.mkdir()
+    with pytest.raises(PredictorError) as refused:
+        prepared_dir(raw_root)
+    said = str(refused.value)
+    assert said.startswith(f"{obsmat}: ") and said.endswith("(expected a BIWI EWAP obsmat.txt)")
 
 
 def test_unknown_protocol_and_dataset(prepared):
