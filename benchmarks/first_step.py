@@ -112,7 +112,16 @@ def main() -> None:
 def _measure(args: argparse.Namespace) -> None:
     runs = {mode: run_mode(mode, args) for mode in MODES}
     default_paths = [r.robot_positions[1] for r in runs["default"]]
-    report: dict[str, Any] = {"predictor": args.predictor, "episodes": args.episodes, "modes": {}}
+    # what the header line names, so that a saved file says what it measured
+    report: dict[str, Any] = {
+        "predictor": args.predictor,
+        "episodes": args.episodes,
+        "humans": args.humans,
+        "scenario": args.scenario,
+        "seed": args.seed,
+        "profile": args.profile,
+        "modes": {},
+    }
     print(
         f"CMPC, {args.predictor}, {args.humans} humans, {args.scenario}, {args.profile}, seeds {args.seed}.."
         f"{args.seed + args.episodes - 1}: success / collision / contact %, travel s; first step elsewhere"

@@ -89,6 +89,8 @@ def test_first_steps_json_is_as_documented(tmp_path, monkeypatch):
     argv = ["--predictor", CV, "--episodes", "1", "--humans", "1"]
     report = run_json("first_step", argv, tmp_path, monkeypatch)
     check_documented(table("first_step"), [report])
+    # what its header line names: a saved file said neither crowd, scenario, seeds nor conventions
+    assert {"humans": 1, "scenario": "circle", "seed": 0, "profile": "paper"}.items() <= report.items()
     assert list(report["modes"]) == ["default", "ipopt_alone", "fatrop_alone"]
     check_documented(table("first_step", 1), report["modes"].values())
 
