@@ -29,6 +29,7 @@ from bench_cli import (  # noqa: E402
     check_distinct,
     episode_bar,
     episode_count,
+    figure,
     human_count,
     json_on_stdout,
     output_file,
@@ -78,13 +79,14 @@ def run_row(controller, label: str, episodes: int, seed: int, humans: int) -> di
 
 
 def print_rows(rows: list[dict[str, Any]]) -> None:
+    """The rows as a table; a median of no robot-human distance (no human: inf, null in the JSON) is "-"."""
     print(f"{'':<30}{'success %':>10}{'collision % (95 %)':>22}{'min dist m':>12}{'travel s':>10}")
     for row in rows:
         low, high = row["collision_95_pct"]
         travel = "-" if row["travel_mean_s"] is None else f"{row['travel_mean_s']:.2f}"
         collision = f"{row['collision_pct']:>8.0f} ({low:>4.0f}-{high:>3.0f})"
         print(f"{row['row']:<30}{row['success_pct']:>10.0f}{collision}"
-              f"{row['min_distance_median_m']:>17.2f}{travel:>10}")  # fmt: skip
+              f"{figure(row['min_distance_median_m'], '>17.2f')}{travel:>10}")  # fmt: skip
 
 
 def main() -> None:

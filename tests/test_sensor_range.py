@@ -28,6 +28,18 @@ def test_a_row_for_full_observation_and_two_per_radius(tmp_path, monkeypatch, ca
     assert "tracks not given" in capsys.readouterr().out
 
 
+def test_no_human_prints_no_distance(monkeypatch, capsys):
+    """Without a human no robot-human distance is measured: the table printed "inf" where the JSON has null
+    and the other benchmarks print "-"."""
+    argv = ["--predictor", "constant_velocity", "--radii", "4", "--humans", "0", "--episodes", "1"]
+    monkeypatch.setattr(sys, "argv", ["sensor_range.py", *argv])
+    sensor_range.main()
+    out = capsys.readouterr().out
+    rows = out.splitlines()[2:]
+    assert len(rows) == 3 and "inf" not in out
+    assert [line.split()[-2] for line in rows] == ["-"] * 3  # the min dist column, before travel s
+
+
 @pytest.mark.parametrize("text", ["0", "-2", "inf", "nan", "x"])
 def test_a_radius_that_is_no_finite_distance_is_refused(text):
     with pytest.raises(
