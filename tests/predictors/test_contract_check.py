@@ -240,6 +240,14 @@ def test_a_head_type_that_is_neither_gaussian_nor_point_is_refused(head):
         check_step_contract(net, "model 'x'", obs_len=OBS_LEN)
 
 
+def _train_three_epochs(model: str, tmp_path, capsys) -> tuple[int, list[str]]:
+    """``crowdmpc train`` of plugin ``model``, 3 epochs on a walk into tmp_path/run: exit code, stderr."""
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    argv = ["--plugin", model, "train", "--model", model, "--train", str(data), "--val", str(data)]
+    code = main([*argv, "--epochs", "3", "--out", str(tmp_path / "run"), "--no-progress"])
+    return code, capsys.readouterr().err.strip().splitlines()
+
+
 def test_a_training_whose_loss_is_nan_stops_after_that_epoch_in_one_line_and_writes_no_weights(
     tmp_path, capsys
 ):
@@ -247,10 +255,7 @@ def test_a_training_whose_loss_is_nan_stops_after_that_epoch_in_one_line_and_wri
     them back, with "tensor 'embed.weight' holds NaN or infinite values", which named neither the cause nor
     the epoch."""
     model = f"{BROKEN}:DividesByItsOwnDistance"
-    data = write_walk_file(tmp_path / "walk.ndjson")
-    argv = ["--plugin", model, "train", "--model", model, "--train", str(data), "--val", str(data)]
-    code = main([*argv, "--epochs", "3", "--out", str(tmp_path / "run"), "--no-progress"])
-    err = capsys.readouterr().err.strip().splitlines()
+    code, err = _train_three_epochs(model, tmp_path, capsys)
     assert code == 2 and err[-1].startswith(
         f"crowdmpc train: error: model {model!r}: training diverged: the training loss was nan in epoch 0, "
         "and no epoch before it validated"
@@ -266,10 +271,7 @@ def test_a_diverged_epoch_whose_validation_ade_is_finite_is_no_best_epoch(tmp_pa
     validation ADE, stay finite: that epoch was saved as the best, said to be "the best epoch before" the
     divergence it was, and its weights written as a trained model's (exit 0)."""
     model = f"{BROKEN}:NegativeSigmas"
-    data = write_walk_file(tmp_path / "walk.ndjson")
-    argv = ["--plugin", model, "train", "--model", model, "--train", str(data), "--val", str(data)]
-    code = main([*argv, "--epochs", "3", "--out", str(tmp_path / "run"), "--no-progress"])
-    err = capsys.readouterr().err.strip().splitlines()
+    code, err = _train_three_epochs(model, tmp_path, capsys)
     assert code == 2 and err[-1].startswith(
         f"crowdmpc train: error: model {model!r}: training diverged: the training loss was nan in epoch 0, "
         "and no epoch before it validated; no weights written"
