@@ -6,6 +6,7 @@ import math
 import subprocess
 import sys
 import warnings
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -687,3 +688,25 @@ def test_end_on_collision_takes_numpys_bool_as_envconfigs_flags_do():
     robots_visible, the velocity gain and the sensor radius take numpy's scalars."""
     env = CrowdNavEnv(n_humans=1, end_on_collision=np.bool_(True))
     assert env.end_on_collision is True
+
+
+@pytest.mark.parametrize(("profile", "steps"), [("paper", 98), ("v1", 75)])
+def test_the_readmes_time_aware_limit_ends_with_the_environment(profile, steps):
+    """README.md, "Seeds, ends, vectors", gave EnvConfig().max_steps (98) as the limit for every profile, but
+    v1's crowd ends at 75 steps, where TimeAwareObservation then read 75/98, not 1."""
+    readme = (Path(__file__).parents[2] / "README.md").read_text(encoding="utf-8")
+    assert f"{steps} for " in " ".join(readme.split())
+    made = gym.make(crowdsim.ENV_ID, config={"profile": profile})
+    limit = made.unwrapped.config.max_steps
+    assert limit == steps == make_env_config(profile).max_steps
+    env = gym.wrappers.TimeAwareObservation(
+        gym.make(crowdsim.ENV_ID, config={"profile": profile}, max_episode_steps=limit),
+        flatten=False,
+        normalize_time=True,
+    )
+    env.reset(seed=0)
+    ended = False
+    while not ended:
+        obs, _, terminated, truncated, _ = env.step(np.zeros(env.action_space.shape))
+        ended = terminated or truncated
+    assert truncated and obs["time"] == pytest.approx(1.0)
