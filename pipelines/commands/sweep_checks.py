@@ -4,6 +4,7 @@ the MPC's d_min."""
 
 from __future__ import annotations
 
+from functools import partial
 from typing import TYPE_CHECKING, Any, Final
 
 from mpc.config import MPC_BOUNDS, MPC_LEAST
@@ -33,24 +34,33 @@ if TYPE_CHECKING:
     from predictors.base import Predictor
 
 
-def check_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None = None) -> None:
+def check_predictors(
+    experiment: Experiment, chosen_by: Mapping[str, str] | None = None
+) -> dict[str, Predictor]:
     """Fail before starting workers, not once per episode in errors.jsonl: every predictor is registered or
     in a zoo, a zoo model's kind is registered (a plugin's, with --plugin, which the workers inherit), and it
     loads as simulate loads it (its files' sha256 as its manifest records them, its net's contract), each
     refusal simulate's one line. ``chosen_by``: a predictor's name -> where the run chose it ("run.toml:
-    controller.predictor", "--predictors"), which its refusal names first."""
+    controller.predictor", "--predictors"), which its refusal names first. Returns the zoo models loaded,
+    by name, for the couplings' and margins' checks (``check_plan``): each read again, a `zoo add
+    --replace` between the reads had one check pass weights the next did not see."""
     from predictors import zoo
     from predictors.errors import PredictorError
     from predictors.models import model_kind
-    from predictors.registry import PREDICTORS, available
+    from predictors.registry import PREDICTORS
 
     chosen_by = chosen_by or {}
     # only the predictors some method plans with: an orca or straight column loads none, and registered ones
     # need no zoo (a damaged user manifest stopped a sweep of constant velocity and ORCA)
     wanted = {name for _, spec in experiment.methods if (name := spec.predictor_name) is not None}
     if wanted <= set(PREDICTORS):
-        return
-    known = set(available())
+        return {}
+    entries: dict[
+        str, zoo.Located
+    ] = {}  # both manifests read once: the entry each name loads (shipped first)
+    for located in zoo.zoo_entries():
+        entries.setdefault(located.entry.name, located)
+    known = set(PREDICTORS) | set(entries)
     missing = sorted(wanted - known)
     if missing:
         where = next((chosen_by[name] for name in missing if name in chosen_by), None)
@@ -61,20 +71,21 @@ def check_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None
             f"{missing} that are not available; available: {sorted(known)} ({hint}train or fetch the zoo "
             "models)"
         )
-    for name in sorted(wanted):
-        located = zoo.locate(name)
-        if located is not None:
-            where = f"{chosen_by[name]}: " if name in chosen_by else ""
-            try:
-                model_kind(located.entry.model)
-            except PredictorError as exc:
-                raise PipelineError(f"{where}predictor {name!r} of the {located.source} zoo: {exc}") from None
-            try:
-                zoo.load_located(located)  # what every worker would do first, and fail at
-            except (PipelineError, PredictorError) as exc:
-                if not where:
-                    raise
-                raise PipelineError(f"{where}{exc}") from None
+    loaded: dict[str, Predictor] = {}
+    for name in sorted(wanted - set(PREDICTORS)):
+        located = entries[name]
+        where = f"{chosen_by[name]}: " if name in chosen_by else ""
+        try:
+            model_kind(located.entry.model)
+        except PredictorError as exc:
+            raise PipelineError(f"{where}predictor {name!r} of the {located.source} zoo: {exc}") from None
+        try:
+            loaded[name] = zoo.load_located(located)  # what every worker would do first, and fail at
+        except (PipelineError, PredictorError) as exc:
+            if not where:
+                raise
+            raise PipelineError(f"{where}{exc}") from None
+    return loaded
 
 
 def check_plan(experiment: Experiment, cfg: RunConfig | None = None) -> None:
@@ -89,10 +100,16 @@ def check_plan(experiment: Experiment, cfg: RunConfig | None = None) -> None:
     from pipelines.loop.spec import controller_names
 
     controller_names()
-    check_predictors(experiment, {} if cfg is None else _predictors_chosen(cfg))
+    loaded = check_predictors(experiment, {} if cfg is None else _predictors_chosen(cfg))
     for check, keys in (
-        (check_couplings, (("controller", "coupling"), ("controller", "predictor"), ("sweep", "predictors"))),
-        (check_margins, (("controller", "margins"), ("mpc", "horizon"), *SENSING_KEYS)),
+        (
+            partial(check_couplings, loaded=loaded),
+            (("controller", "coupling"), ("controller", "predictor"), ("sweep", "predictors")),
+        ),
+        (
+            partial(check_margins, loaded=loaded),
+            (("controller", "margins"), ("mpc", "horizon"), *SENSING_KEYS),
+        ),
         (check_contact_distances, (("mpc", "d_min"),)),
         (check_solvable_values, SOLVABLE_KEYS),
     ):
@@ -137,15 +154,16 @@ def _chosen_where(cfg: RunConfig, keys: tuple[tuple[str, str], ...]) -> str | No
     return next((cfg.label(section, key) for section, key in keys if cfg.chosen(section, key)), None)
 
 
-def check_couplings(experiment: Experiment) -> None:
+def check_couplings(experiment: Experiment, loaded: Mapping[str, Predictor] | None = None) -> None:
     """Every CMPC and DMPC method's coupling is one its controller builds (mpc_setup.check_coupling, the rule
     the controller applies as it is built), refused with the method named: the coupled NLP given to DMPC
     (--set controller.coupling=nlp) or with the ORCA oracle (the coupling experiment with --predictor
-    orca_oracle) failed once per episode in errors.jsonl."""
+    orca_oracle) failed once per episode in errors.jsonl. ``loaded``: predictors ``check_predictors`` loaded,
+    by name (others are loaded here)."""
     from pipelines.loop.mpc_setup import check_coupling
     from predictors.registry import load_predictor
 
-    loaded: dict[str, Predictor] = {}  # the coupling experiment's two NLP methods share their predictor
+    loaded = dict(loaded or {})  # the coupling experiment's two NLP methods share their predictor
     for label, spec in experiment.methods:
         if spec.controller not in ("cmpc", "dmpc") or spec.coupling == "ibr":
             continue
@@ -196,21 +214,29 @@ def _each_mpc(experiment: Experiment, check: Callable[[MPCConfig], None], refusa
             raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
 
 
-def check_margins(experiment: Experiment) -> None:
+def check_margins(experiment: Experiment, loaded: Mapping[str, Predictor] | None = None) -> None:
     """Every method's margins resolve (a calibration that matches the weights, with per-class margins for the
     per-human modes) before workers start; refused with the method named, as the other checks are: --vary
     mpc.horizon=4,6 with conformal margins was told to 'plan with a horizon of at most 4 (mpc.horizon)',
-    a setting it never gave, without the column that asked for 6."""
+    a setting it never gave, without the column that asked for 6. ``loaded``: as ``check_couplings``'; the
+    margins are looked up for the weights those hold (the manifest, read again, may name others)."""
     from pipelines.loop.mpc_setup import mpc_config
-    from predictors.registry import checkpoint_sha256
+    from predictors.registry import checkpoint_sha256, loaded_sha256
 
+    loaded = loaded or {}
+    blocks: dict[tuple[Any, ...], Any] = {}  # Table II's CMPC and DMPC plan with one block: read once
     for label, spec in experiment.methods:
         name = spec.predictor_name
-        horizon, sha256 = mpc_config(spec).horizon, checkpoint_sha256(name)
+        predictor = loaded.get(name) if name is not None else None
+        sha256 = loaded_sha256(predictor) if predictor is not None else checkpoint_sha256(name)
+        horizon = mpc_config(spec).horizon
         world = experiment.method_worlds.get(label, experiment.world)
         margins = spec.margins.behind(world.sensor_range, world.sensor_tracks)
         try:
-            at = margins.located(name, horizon, sha256)  # the calibrations read once, as the controller does
+            key = (margins, name, horizon, sha256)
+            if key not in blocks:  # the calibrations read once, as the controller does
+                blocks[key] = margins.located(name, horizon, sha256)
+            at = blocks[key]
             margins.resolve(name, horizon, sha256, at)
             margins.resolve_classes(name, horizon, sha256, at)
         except PipelineError as exc:

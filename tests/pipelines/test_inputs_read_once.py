@@ -1,0 +1,43 @@
+"""A command reads each of its inputs (a zoo's manifest, a checkpoint, a calibrations file) once: the bytes
+checked are the bytes used. Read again, a `zoo add --replace` or a calibrate run in between had one check
+pass files the next one, or the run, never saw."""
+
+from __future__ import annotations
+
+import builtins
+import collections
+import io
+import os
+from pathlib import Path
+
+
+def count_opens(monkeypatch, *suffixes: str) -> collections.Counter:
+    """How often each file whose name ends in one of ``suffixes`` is opened from now on, by path."""
+    real_open, opened = io.open, collections.Counter()
+
+    def opening(file, *args, **kwargs):
+        if isinstance(file, str | os.PathLike) and str(file).endswith(suffixes):
+            opened[Path(file).resolve()] += 1
+        return real_open(file, *args, **kwargs)
+
+    monkeypatch.setattr(io, "open", opening)
+    monkeypatch.setattr(builtins, "open", opening)
+    return opened
+
+
+def test_a_sweeps_checks_read_the_manifest_weights_and_calibrations_once(monkeypatch):
+    """check_predictors, check_couplings and check_margins each read the zoo's manifest (the couplings' the
+    weights too, and the margins' the calibrations once a method): the coupling experiment's three methods
+    of one predictor read the manifest six times and its weights twice."""
+    from pipelines.commands.sweep_checks import check_plan
+    from pipelines.experiments.cells import get_experiment
+    from pipelines.loop.margins import MarginSpec
+    from predictors.zoo import checkpoints_dir
+
+    experiment = get_experiment("coupling").with_margins(MarginSpec("conformal", alpha=0.1))
+    shipped = checkpoints_dir().resolve()
+    opened = count_opens(monkeypatch, ".json", ".pt")
+    check_plan(experiment)
+    name = experiment.methods[0][1].predictor
+    read = {path.name: n for path, n in opened.items() if path.parent == shipped}
+    assert read == {"manifest.json": 1, f"{name}.json": 1, f"{name}.pt": 1, "calibrations.json": 1}
