@@ -22,6 +22,8 @@ from predictors.errors import CheckpointMismatch, PredictorError, short_repr
 from predictors.hashing import is_sha256, sha256_file
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     import torch
 
     from predictors.learned import LearnedPredictor
@@ -194,9 +196,11 @@ def read_checkpoint(
     name: str | None = None,
     expected_sha256: str | None = None,
     expected_config_sha256: str | None = None,
+    check_config: Callable[[dict[str, Any]], None] | None = None,
 ) -> CheckedPair:
     """The predictor of a checkpoint pair (``config`` defaults to ``weights`` with ``.json``), with the bytes
-    of each file it was made from.
+    of each file it was made from. ``check_config``: called with the parsed config before its model kind is
+    looked up, for a caller's own refusal of the bytes that then load (`zoo add --shipped`'s kinds).
 
     Everything is checked before it is used, each failure a PredictorError naming the file: each file's
     sha256 (when expected, as the zoo always does) on the bytes then used, the config's first, the model
@@ -214,6 +218,8 @@ def read_checkpoint(
     data = read_capped(config, MAX_DOCUMENT_BYTES, f"a {what} may have", expected_config_sha256)
     _check_bytes(config, data, expected_config_sha256)
     document = parse_document(config, data, CONFIG_FORMAT, what)
+    if check_config is not None:
+        check_config(document)
     kind = _config_kind(document, config)
     own_name = document.get("name", weights.stem)
     if not isinstance(own_name, str):

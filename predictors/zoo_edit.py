@@ -11,12 +11,13 @@ import json
 import os
 import re
 import shutil
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from dataclasses import replace as replace_fields
+from functools import partial
 from pathlib import Path
 from typing import Any
 
-from predictors.checkpoint import CONFIG_FORMAT, parse_document, read_checkpoint, read_document
+from predictors.checkpoint import CONFIG_FORMAT, parse_document, read_checkpoint
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 from predictors.manifest import (
@@ -68,7 +69,6 @@ def add_entry(
     config = weights.with_suffix(".json")
     if shipped:
         root = checkpoints_dir(directory)
-        _check_shipped_kind(config)
     else:
         root = writable_zoo_dir(directory)
         _check_not_shipped(name)
@@ -77,6 +77,7 @@ def add_entry(
     _check_case_clash(name, entries, root, which)
     entry, weights_bytes, config_bytes = _new_entry(
         weights,
+        check_config=partial(_check_shipped_kind, config) if shipped else None,
         name=name,
         protocol=protocol,
         training_data=training_data,
@@ -99,14 +100,17 @@ def add_entry(
     return entries[name], None if _stopped_add(previous, entry) else previous  # finished: no entry replaced
 
 
-def _new_entry(weights: Path, *, name: str, **recorded: Any) -> tuple[ZooEntry, bytes, bytes]:
+def _new_entry(
+    weights: Path, *, check_config: Callable[[dict], None] | None, name: str, **recorded: Any
+) -> tuple[ZooEntry, bytes, bytes]:
     """The entry of ``weights`` (and its config) under ``name``, the weights' bytes and the config's as the
-    zoo keeps them (named ``name``); ``recorded``: ZooEntry's protocol, training_data, metrics and training.
-    PredictorError when the pair does not load or the entry does not check."""
+    zoo keeps them (named ``name``); ``recorded``: ZooEntry's protocol, training_data, metrics and training;
+    ``check_config``: ``read_checkpoint``'s. PredictorError when the pair does not load or the entry does
+    not check."""
     config = weights.with_suffix(".json")
     # The bytes kept are the bytes that loaded, each file read once: read again to be hashed and copied, a
     # pair replaced meanwhile (a training run writing it) was added without a check.
-    checked = read_checkpoint(weights, config)  # refuse a pair that does not load
+    checked = read_checkpoint(weights, config, check_config=check_config)  # refuse a pair that does not load
     document = parse_document(config, checked.config, CONFIG_FORMAT, "crowdmpc predictor config")
     if "model" not in document:
         raise PredictorError(f'{config}: "model" is missing; `crowdmpc train` writes it')
@@ -332,14 +336,14 @@ def _taken(name: str, root: Path, which: str, previous: ZooEntry, entry: ZooEntr
     )
 
 
-def _check_shipped_kind(config: Path) -> None:
+def _check_shipped_kind(config: Path, document: dict) -> None:
     """Refuse a config whose model kind the project does not ship: every clone reads the shipped zoo, and
-    it would then need a module (a plugin's, an entry point's) that the repository lacks."""
+    it would then need a module (a plugin's, an entry point's) that the repository lacks. ``document``: the
+    config as it loads (read_checkpoint's check_config): read apart before the load, a config replaced
+    between the reads was checked and another one added."""
     from predictors.models import shipped as shipped_kinds
 
-    if not config.is_file():
-        return  # load_checkpoint says what is wrong with it
-    model = read_document(config, CONFIG_FORMAT, "crowdmpc predictor config").get("model")
+    model = document.get("model")
     kinds = sorted(shipped_kinds())
     if isinstance(model, str) and model not in kinds:
         raise PredictorError(

@@ -41,3 +41,24 @@ def test_a_sweeps_checks_read_the_manifest_weights_and_calibrations_once(monkeyp
     name = experiment.methods[0][1].predictor
     read = {path.name: n for path, n in opened.items() if path.parent == shipped}
     assert read == {"manifest.json": 1, f"{name}.json": 1, f"{name}.pt": 1, "calibrations.json": 1}
+
+
+def test_zoo_add_shipped_reads_the_config_it_checks_the_kind_of_once(tmp_path, monkeypatch):
+    """`zoo add --shipped` read the config for its model kind, then again as the pair loaded: a config
+    replaced between the reads had its kind checked and another one added to the shipped zoo."""
+    import shutil
+
+    from predictors import zoo, zoo_edit
+
+    src, shipped = tmp_path / "src", tmp_path / "clone" / "checkpoints"
+    src.mkdir()
+    shipped.mkdir(parents=True)
+    for suffix in (".pt", ".json"):
+        shutil.copyfile(zoo.shipped_checkpoints_dir() / f"social_lstm_eth{suffix}", src / f"mine{suffix}")
+    monkeypatch.setenv(zoo.CHECKPOINTS_ENV, str(shipped))
+    opened = count_opens(monkeypatch, ".json")
+    entry = zoo_edit.add_to_zoo(
+        src / "mine.pt", name="mine", protocol="p", training_data={}, metrics={}, shipped=True
+    )
+    assert entry.model == "social_lstm" and zoo.locate("mine").source == zoo.SHIPPED
+    assert opened[(src / "mine.json").resolve()] == 1
