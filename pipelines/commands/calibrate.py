@@ -224,12 +224,15 @@ def _closed_loop_holdout(args: argparse.Namespace, sha256: str | None) -> Any:
     after = dataclasses.replace(
         plan, seed=plan.seed + plan.episodes, margins=parse_margins(args.holdout_margins)
     )
-    measured = closed_loop_errors(after, progress=args.progress)
-    if measured.predictor_sha256 != sha256:  # their coverage would be other weights' (nothing is stored)
-        raise PipelineError(
-            f"{args.predictor}'s weights were replaced as calibrate ran (zoo add --replace?): margins of "
-            f"sha256 {str(sha256)[:12]}…, held out with {str(measured.predictor_sha256)[:12]}…; none stored"
-        )
+
+    def same_weights(loaded: str | None) -> None:  # their coverage would be other weights' (nothing stored)
+        if loaded != sha256:
+            raise PipelineError(
+                f"{args.predictor}'s weights were replaced as calibrate ran (zoo add --replace?): margins of "
+                f"sha256 {str(sha256)[:12]}…, held out with {str(loaded)[:12]}…; none stored"
+            )
+
+    measured = closed_loop_errors(after, progress=args.progress, check_weights=same_weights)
     return measured.errors, measured.classes, measured.shortfall
 
 
@@ -325,7 +328,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _calibrate(args: argparse.Namespace) -> int:
-    from pipelines.experiments.calibrate import (
+    from pipelines.experiments.calibration_report import (
         class_coverage_report,
         coverage_notes,
         format_coverage,

@@ -559,7 +559,7 @@ def test_real_calibration_refuses_held_out_margins(monkeypatch, capsys):
 
 def test_held_out_coverage_targets_are_printed_exactly():
     """The target was rounded to a whole percent: alpha 0.025 printed "target 98%", 0.005 "target 100%"."""
-    from pipelines.experiments.calibrate import format_coverage
+    from pipelines.experiments.calibration_report import format_coverage
 
     alphas = (0.1, 0.025, 0.005, 0.001, 1e-05)
     text = format_coverage(alphas, [[0.5]] * len(alphas), [[0.9]] * len(alphas))

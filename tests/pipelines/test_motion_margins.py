@@ -136,7 +136,7 @@ def test_a_step_records_its_margins_and_guided_robots(tmp_path, monkeypatch):
 
 
 def test_calibrate_names_a_block_stored_without_class_margins_and_an_empty_held_out_class(capsys):
-    from pipelines.experiments.calibrate import class_coverage_report, missing_class_margins
+    from pipelines.experiments.calibration_report import class_coverage_report, missing_class_margins
 
     errors, motion = class_errors(4)
     full = constant_velocity_block(errors, classes=motion, shortfall=errors)
@@ -179,7 +179,7 @@ def test_calibrate_does_not_store_a_block_without_class_margins_over_one_with_th
 def test_held_out_class_coverage_stays_with_its_block(capsys):
     """calibrate --json's holdout_class_coverage and holdout_shortfall_coverage skipped blocks without
     class margins, so entry i was no longer blocks[i]'s: a block without them has None in its place."""
-    from pipelines.experiments.calibrate import class_coverage_report
+    from pipelines.experiments.calibration_report import class_coverage_report
 
     errors, motion = class_errors(4)
     full = constant_velocity_block(errors, classes=motion, shortfall=errors)

@@ -11,7 +11,7 @@ import pytest
 
 from pipelines.cli import main
 from pipelines.commands.train_data import data_hashes, note_shared_data
-from pipelines.experiments.calibrate import coverage_notes
+from pipelines.experiments.calibration_report import coverage_notes
 from tests.cli_calls import run_cli as run
 from tests.predictors.samples import write_lines, write_tiny_ewap, write_walk_file
 
