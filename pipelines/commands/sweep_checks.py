@@ -55,9 +55,8 @@ def check_predictors(
     wanted = {name for _, spec in experiment.methods if (name := spec.predictor_name) is not None}
     if wanted <= set(PREDICTORS):
         return {}
-    entries: dict[
-        str, zoo.Located
-    ] = {}  # both manifests read once: the entry each name loads (shipped first)
+    # both manifests read once: the entry each name loads (shipped first)
+    entries: dict[str, zoo.Located] = {}
     for located in zoo.zoo_entries():
         entries.setdefault(located.entry.name, located)
     known = set(PREDICTORS) | set(entries)
