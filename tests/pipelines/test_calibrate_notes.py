@@ -30,7 +30,7 @@ def episodes(monkeypatch):
     alpha 0.1) with the details the real ones record of their plan."""
     from pipelines.experiments import calibrate as experiment
 
-    def measured(plan, progress=True):
+    def measured(plan, progress=True, check_weights=None):
         scores, motion = class_errors(4)
         recorded = ("episodes", "seed", "humans", "controller", "profile", "visibility", "near")
         details = {key: getattr(plan, key) for key in recorded}
@@ -281,7 +281,7 @@ def test_calibrate_says_which_margins_no_plan_can_keep(monkeypatch, capsys):
     in the place of its key's block; the first run planning with it at that horizon was refused."""
     from pipelines.experiments import calibrate as experiment
 
-    def measured(plan, progress=True):
+    def measured(plan, progress=True, check_weights=None):
         scores, motion = class_errors(4)  # walking's 0.9 margins 0.72 k m: 1.44 k m when doubled
         return experiment.ClosedLoopErrors(2 * scores, motion, scores, {"humans": list(plan.humans)}, None)
 

@@ -404,7 +404,7 @@ def _episodes(monkeypatch, errors: np.ndarray | None = None) -> list:
 
     plans = []
 
-    def measured(plan, progress=True):
+    def measured(plan, progress=True, check_weights=None):
         plans.append(plan)
         return synthetic_closed_loop(plan, errors)
 
@@ -641,11 +641,11 @@ def test_an_interrupted_held_out_run_leaves_the_calibrations_as_they_were(
     calibrate = experiment.closed_loop_errors
     during = []
 
-    def interrupted(plan, progress=True):
+    def interrupted(plan, progress=True, check_weights=None):
         if plan.seed == 7 + 200:  # the held-out episodes, after the calibration's
             during.append(path.read_bytes())
             raise KeyboardInterrupt
-        return calibrate(plan, progress)
+        return calibrate(plan, progress, check_weights)
 
     monkeypatch.setattr(experiment, "closed_loop_errors", interrupted)
     argv = [*CALIBRATE, "--alpha", "0.3", "--seed", "7", "--holdout"]  # other seeds: another block
@@ -678,12 +678,12 @@ def test_taking_back_the_held_out_runs_blocks_keeps_a_block_another_calibrate_st
     earlier = read_calibration_file(path) if had_file else []
     calibrate = experiment.closed_loop_errors
 
-    def interrupted(plan, progress=True):
+    def interrupted(plan, progress=True, check_weights=None):
         if plan.seed == 7 + 200:  # the held-out episodes: another calibrate stores its block now
             ours = read_calibration_file(path)
             save_calibration(dataclasses.replace(ours[-1], alpha=0.2))
             raise KeyboardInterrupt
-        return calibrate(plan, progress)
+        return calibrate(plan, progress, check_weights)
 
     monkeypatch.setattr(experiment, "closed_loop_errors", interrupted)
     argv = [*CALIBRATE, "--alpha", "0.3", "--seed", "7", "--holdout", "--holdout-margins", "conformal:0.3"]
@@ -703,7 +703,7 @@ def test_a_block_whose_details_hold_a_tuple_is_taken_back_when_the_held_out_run_
 
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
 
-    def measured(plan, progress=True):
+    def measured(plan, progress=True, check_weights=None):
         if plan.margins.mode != "none":  # the held-out episodes, planning with the stored block
             assert (tmp_path / "calibrations.json").exists()
             raise KeyboardInterrupt
@@ -746,7 +746,7 @@ def test_the_blocks_of_a_calibrate_killed_in_its_held_out_run_are_taken_back_by_
         "from pipelines.cli import main\n"
         "from pipelines.experiments import calibrate as experiment\n"
         "from tests.calibration_blocks import synthetic_closed_loop\n"
-        "def killed(plan, progress=True):\n"
+        "def killed(plan, progress=True, check_weights=None):\n"
         "    if plan.seed == 7 + 200:  # the held-out episodes\n"
         "        os._exit(9)\n"
         "    return synthetic_closed_loop(plan)\n"
@@ -879,7 +879,7 @@ def test_held_out_episodes_that_met_no_human_report_no_coverage_and_keep_the_blo
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     runs = iter([None, np.zeros((0, 0))])  # the calibration's errors, then the held-out run's: none
 
-    def measured(plan, progress=True):
+    def measured(plan, progress=True, check_weights=None):
         return synthetic_closed_loop(plan, next(runs))
 
     monkeypatch.setattr(experiment, "closed_loop_errors", measured)
