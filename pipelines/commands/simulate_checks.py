@@ -6,6 +6,8 @@ NLP that takes seconds to build, a plugin's changed code (the notes on the robot
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from pipelines.commands.idle_choices import (
@@ -109,19 +111,23 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
         )
 
 
-def check_mpc_solvable(config: RunConfig) -> None:
+def check_mpc_solvable(config: RunConfig, folders: Sequence[Path | None] = ()) -> None:
     """The bounds and least values the MPC's NLP is built with (``mpc.nlp.check_solvable``), refused as a
     run starts and named where they were chosen; a config read back from a sweep folder is not held to
-    them."""
+    them. ``folders``: the sweep folders the run would add to or take from (--out, --reuse), named in the
+    refusal when one ran with the value before its bound (``recorded.ran_beyond_bound``)."""
     from mpc.errors import MPCConfigError
     from mpc.nlp import check_solvable as check_nlp
     from pipelines.config.entries import reason
+    from pipelines.config.recorded import ran_beyond_bound
 
     try:
         check_nlp(config.mpc)
     except MPCConfigError as exc:
         key = str(exc).partition(" ")[0]  # its message starts with the field it refuses
-        raise config.error("mpc", key, reason(str(exc), key)) from None
+        value = getattr(config.mpc, key)
+        notes = (ran_beyond_bound(folder, "mpc", key, value) for folder in folders if folder is not None)
+        raise config.error("mpc", key, reason(str(exc), key) + next((n for n in notes if n), "")) from None
 
 
 def check_predictors_known(config: RunConfig, *keys: tuple[str, str]) -> None:

@@ -347,7 +347,7 @@ def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
         check_sweep_directory(out, cfg.label("sweep", "out"))
     check_world(cfg)
     if not args.report_only:  # a report starts no worker
-        check_mpc_solvable(cfg)  # not of a report: a folder that ran beyond a bound added since reads back
+        check_mpc_solvable(cfg, (out, args.reuse))  # not of a report: a folder that ran beyond one reads back
         check_iterations_recorded(cfg)
         _check_this_machine(cfg)
     return cfg, out

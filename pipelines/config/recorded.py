@@ -97,6 +97,27 @@ def report_config(args: Any, options: Sequence[Option]) -> RunConfig:
     return resolve(entries, f"{sweep_file} (run {last})")
 
 
+def ran_beyond_bound(directory: Path, section: str, key: str, value: Any) -> str:
+    """The words ("" for none) a refusal of ``value`` adds when a sweep's own run in ``directory`` recorded
+    it: that folder ran before the bound refusing it now, and its report still reads back (the refusal alone
+    sent a rerun or --reuse of it to look for a typo, as if the folder held no such run)."""
+    from pipelines.experiments.run_lines import own_runs
+
+    try:
+        _, runs = recorded_runs(directory)
+    except ConfigError:  # no sweep there: the refusal as for any run
+        return ""
+    for index in own_runs(runs):
+        values = runs[index - 1].get("config")
+        recorded = values.get(section) if isinstance(values, dict) else None
+        if isinstance(recorded, dict) and recorded.get(key) == value:
+            return (
+                f"; {directory} ran with {section}.{key} = {value!r} before that bound: no more of it runs, "
+                f"and `crowdmpc sweep --report-only --out {directory}` still reports it"
+            )
+    return ""
+
+
 def last_own_run(runs: list[dict[str, Any]]) -> int:
     """The number (from 1) of the last run line that is a run of the sweep itself, not the code of episodes
     ``sweep --reuse`` took (pipelines.experiments.reuse); the last line when none is."""

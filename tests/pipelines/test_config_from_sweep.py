@@ -417,3 +417,39 @@ def test_the_keys_read_back_as_inf_are_those_that_take_it():
         (s.name, k.name) for s in SECTIONS for k in s.keys if k.kind == "float" and k.default is not None
     ]
     assert [pair for pair in numbers if takes_inf(*pair)] == list(INFINITE_KEYS)
+
+
+@pytest.mark.parametrize(
+    "bounds, key, lifted, ran, limit",
+    [
+        (MPC_LEAST, "w_goal", 0.0, "1e-60", "at least 1e-40"),
+        (MPC_LEAST, "delta", 0.0, "1e-200", "at least 1e-40"),
+        (MPC_BOUNDS, "rho", math.inf, "2000.0", "at most 1000 s^2"),
+    ],
+    ids=["w_goal", "delta", "rho"],
+)
+def test_a_rerun_of_a_sweep_beyond_a_bound_added_since_names_its_folder_and_report(
+    tmp_path, capsys, monkeypatch, bounds, key, lifted, ran, limit
+):
+    """The same command again into a sweep folder that ran mpc.w_goal = 1e-60 before its least value, or
+    --reuse of that folder, was refused as any typed value is, naming neither the folder that ran it nor that
+    its report still reads back: the refusal says both, before any worker starts."""
+    out, new = tmp_path / "sweep", tmp_path / "new"
+    options = ["--experiment", "controllers", "--controllers", "cmpc", "--humans", "1", "--robots", "1"]
+    options += ["--episodes-per-cell", "1", "--set", "env.time_limit=2", "--backend", "inline"]
+    options += ["--no-progress", "--set", f"mpc.{key}={ran}"]
+    with monkeypatch.context() as before:
+        before.setitem(bounds, key, (lifted, bounds[key][1]))
+        assert main(["sweep", *options, "--out", str(out)]) == 0
+    held = sorted(p.name for p in out.iterdir()), (out / EPISODES_FILE).read_text()
+    for folder, extra in ((out, []), (new, ["--reuse", str(out)])):
+        capsys.readouterr()
+        assert main(["sweep", *options, *extra, "--episodes-per-cell", "2", "--out", str(folder)]) == 2
+        err = capsys.readouterr().err
+        assert err == (
+            f"crowdmpc sweep: error: --set mpc.{key}: must be {limit}, got {ran}; {out} ran with mpc.{key} = "
+            f"{ran} before that bound: no more of it runs, and `crowdmpc sweep --report-only --out {out}` "
+            "still reports it\n"
+        )
+    assert (sorted(p.name for p in out.iterdir()), (out / EPISODES_FILE).read_text()) == held
+    assert not new.exists()
