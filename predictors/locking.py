@@ -10,15 +10,20 @@ from __future__ import annotations
 
 import fcntl
 import os
+import re
 import stat
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from itertools import takewhile
 from pathlib import Path
+from typing import Final
 
 from predictors.errors import PredictorError
 
 _RETAKES = 8  # a removed lock is retaken at once: more than a few in a row is a file system, not a race
+# The hidden locks crowdmpc's writers leave once released: data synth's and data prepare's beside what they
+# write (.NAME.synth.lock, .NAME.prepare.lock), train's and sweep's in their folder.
+LEFT_LOCK: Final = re.compile(r"\.(?:.+\.(?:synth|prepare)|train|sweep)\.lock")
 
 
 @contextmanager
@@ -107,6 +112,20 @@ def unless_held(path: Path, gone: bool) -> Iterator[bool]:
         yield True
     finally:
         os.close(fd)  # releases the lock
+
+
+def released_locks(folder: Path) -> set[str]:
+    """The names of ``folder``'s crowdmpc locks (``LEFT_LOCK``) that no process holds now: what a finished
+    command leaves by design, and `rm DIR/*` leaves behind (the glob skips hidden names), so a folder that
+    holds nothing else is as good as empty for a new output. A held lock, a link or a file system that cannot
+    tell is not among them: the folder then stays another command's."""
+    names = set()
+    for entry in folder.iterdir():
+        if LEFT_LOCK.fullmatch(entry.name):
+            with unless_held(entry, gone=False) as free:
+                if free:
+                    names.add(entry.name)
+    return names
 
 
 def _planted(path: Path) -> bool:

@@ -231,9 +231,13 @@ def _check_prepare_target(out: Path) -> None:
     refused: its train/val/test files would be replaced by these (a training set was overwritten)."""
     from predictors.data.locate import load_manifest
     from predictors.data.prepare import INCOMPLETE_MARKER
+    from predictors.locking import released_locks
 
+    # a finished `data synth`'s lock stays in its folder by design, and `rm DIR/*` skips it: as good as empty
+    if not out.is_dir() or not {entry.name for entry in out.iterdir()} - released_locks(out):
+        return
     # a manifest of ours, whatever its files now hold: every reader says to prepare such a folder again
-    if not out.is_dir() or not any(out.iterdir()) or load_manifest(out) is not None:
+    if load_manifest(out) is not None:
         return
     if (out / INCOMPLETE_MARKER).is_file():  # a preparation stopped while moving its files in: finish it
         return

@@ -313,10 +313,14 @@ def check_sweep_directory(out: Path, option: str = "--out") -> None:
     # the lock and the temporary sweep.json of a sweep stopped while it wrote its first record are its own
     leftovers = {LOCK_FILE, *(name + PART_SUFFIX for name in (SWEEP_FILE, EPISODES_FILE, ERRORS_FILE))}
     if entries.keys() - leftovers and not entries.keys() & {SWEEP_FILE, EPISODES_FILE}:
-        raise PipelineError(
-            f"{option} {out} holds files but no sweep ({SWEEP_FILE}, {EPISODES_FILE}); a sweep would "
-            "overwrite them: choose an empty or new folder"
-        )
+        from predictors.locking import released_locks
+
+        # a finished `data synth`'s lock stays in its folder by design, and `rm DIR/*` skips it
+        if entries.keys() - leftovers - released_locks(out):
+            raise PipelineError(
+                f"{option} {out} holds files but no sweep ({SWEEP_FILE}, {EPISODES_FILE}); a sweep would "
+                "overwrite them: choose an empty or new folder"
+            )
     own = (EPISODES_FILE, ERRORS_FILE, SWEEP_FILE, LOCK_FILE, MCAP_DIR, EPISODES_FILE + CUT_SUFFIX)
     for name, entry in sorted(entries.items()):
         if name in own or name.endswith(OWN_SUFFIXES):

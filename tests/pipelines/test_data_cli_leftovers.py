@@ -6,6 +6,7 @@ import types
 
 import pytest
 
+from pipelines.errors import PipelineError
 from pipelines.experiments.log import check_sweep_directory
 from predictors import locking
 from tests.cli_calls import run_cli as run
@@ -94,3 +95,23 @@ def test_a_failed_prepare_leaves_no_lock_nor_folder_it_made(tmp_path, capsys):
     obsmat.write_text("")
     assert run(capsys, *argv)[0] == 2
     assert sorted(os.listdir(runs)) == [".prepared.prepare.lock", "prepared"]
+
+
+def test_a_folder_holding_only_a_finished_commands_lock_takes_a_new_output(tmp_path, capsys):
+    """A finished data synth leaves its hidden .NAME.synth.lock in its folder by design, which `rm DIR/*`
+    skips: sweep --out and data prepare --out then refused the folder that held nothing else as one holding
+    files. A lock no process holds is no output; one a running command holds still makes the folder taken."""
+    folder = tmp_path / "synth"
+    folder.mkdir()
+    lock = folder / ".orca.ndjson.synth.lock"
+    lock.write_text("")
+    raw = write_tiny_ewap(tmp_path / "data")
+    argv = ["data", "prepare", "--raw", str(raw), "--out", str(folder), "--no-tags", "--no-check"]
+    with locking.locked(lock, "test"):  # a synth that runs
+        with pytest.raises(PipelineError, match="holds files but no sweep"):
+            check_sweep_directory(folder)
+        code, _, err = run(capsys, *argv)
+        assert code == 2 and "holds files but no prepared data" in err
+    check_sweep_directory(folder)  # refuses nothing
+    assert run(capsys, *argv)[0] == 0
+    assert (folder / "manifest.json").is_file()
