@@ -23,7 +23,7 @@ from crowdsim.conventions import (
     Crossing,
     SuccessRule,
 )
-from crowdsim.errors import SimulationError, real_number, whole_number
+from crowdsim.errors import SimulationError, real_number
 from crowdsim.orca import OrcaParams
 from crowdsim.replay import CROWDS, RECORDED_DT
 from crowdsim.scenarios import FORMATIONS, Formation, check_spacing
@@ -32,6 +32,7 @@ from crowdsim.world import (
     A_MAX,
     DT,
     MOST_ACCEL,
+    MOST_EPISODE_STEPS,
     MOST_SPEED,
     MOST_TIME,
     OBS_LEN,
@@ -40,6 +41,7 @@ from crowdsim.world import (
     V_PREF,
     WorldFacts,
     finite_positive,
+    history_rows,
 )
 
 # Upper bounds of EnvConfig's times, lengths and speeds: far above any crowd a robot navigates, low enough
@@ -93,6 +95,11 @@ class EnvConfig:
         self._check_sizes()
         self._check_dt()
         self._check_margins()
+        if self.max_steps > MOST_EPISODE_STEPS:  # the episode's arrays and loop grow with its steps
+            raise SimulationError(
+                f"EnvConfig.time_limit must be at most {MOST_EPISODE_STEPS} steps of dt = {self.dt:g} s, got "
+                f"{self.time_limit:g} s ({float(self.max_steps):.3g} steps)"
+            )
         if not isinstance(self.orca, OrcaParams):
             raise SimulationError(f"EnvConfig.orca must be an OrcaParams, got {type(self.orca).__name__}")
         if not (isinstance(self.profile, str) and self.profile):
@@ -165,7 +172,7 @@ class EnvConfig:
         for name in ("dt", *ENV_BOUNDS):
             where = f"EnvConfig.{name}"
             self._store(name, real_number(where, getattr(self, name), "a finite number > 0", finite_positive))
-        self._store("history_len", whole_number("EnvConfig.history_len", self.history_len, "an int >= 1", 1))
+        self._store("history_len", history_rows("EnvConfig.history_len", self.history_len))
         for name, (most, unit) in ENV_BOUNDS.items():
             if getattr(self, name) > most:
                 raise SimulationError(

@@ -38,7 +38,7 @@ from typing import Final
 
 import numpy as np
 
-from crowdsim.errors import real_number, whole_number
+from crowdsim.errors import SimulationError, real_number, whole_number
 
 RVO_EPSILON: Final[float] = 1e-5  # RVO2's Definitions.h: tolerance for (almost) parallel lines
 # neighbor_dist is squared (1e300 overflowed the first step): a finite one up to 1000 km, far beyond any
@@ -47,6 +47,8 @@ MAX_NEIGHBOR_DIST: Final[float] = 1e6  # m
 # 1 / time_horizon scales the relative positions: 1e-305 s overflowed the velocity obstacles to inf (and
 # gave velocities pointing away from the goal). A microsecond is far below any horizon (CrowdNav: 5 s).
 MIN_TIME_HORIZON: Final[float] = 1e-6  # s
+# The CLI's bound too (pipelines.config.keys.MOST): a crowd has at most crowdsim.scenarios.MAX_HUMANS people.
+MAX_NEIGHBORS: Final[int] = 1000
 
 
 @dataclass(frozen=True)
@@ -66,7 +68,10 @@ class OrcaParams:
             lambda d: d > 0 and (d <= MAX_NEIGHBOR_DIST or d == math.inf),
         )
         object.__setattr__(self, "neighbor_dist", dist)
-        count = whole_number("OrcaParams.max_neighbors", self.max_neighbors, "an int >= 0", 0)
+        expected = f"an int in [0, {MAX_NEIGHBORS}]"
+        count = whole_number("OrcaParams.max_neighbors", self.max_neighbors, expected, 0)
+        if count > MAX_NEIGHBORS:
+            raise SimulationError(f"OrcaParams.max_neighbors must be {expected}, got {count}")
         object.__setattr__(self, "max_neighbors", count)
         horizon = real_number(
             "OrcaParams.time_horizon",

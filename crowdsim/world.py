@@ -17,7 +17,13 @@ import math
 from dataclasses import dataclass, fields
 from typing import Final
 
-from crowdsim.errors import real_number, whole_number
+from crowdsim.errors import SimulationError, real_number, whole_number
+
+# The largest sizes of the simulator's work, which WorldFacts and EnvConfig refuse beyond and the CLI's config
+# schema reads from here (pipelines.config.keys.MOST): 10**6 history rows took 21 s and 860 MB for three
+# steps, far past any predictor's observed length (TrajNet++'s 9).
+MOST_OBS_LEN: Final[int] = 1000  # L, rows of observed history
+MOST_EPISODE_STEPS: Final[int] = 100_000  # EnvConfig.max_steps: time_limit / dt
 
 
 @dataclass(frozen=True)
@@ -36,10 +42,18 @@ class WorldFacts:
             value = getattr(self, f.name)
             where = f"WorldFacts.{f.name}"
             if f.name == "obs_len":
-                plain: float = whole_number(where, value, "an int >= 1", 1)
+                plain: float = history_rows(where, value)
             else:
                 plain = real_number(where, value, "a finite number > 0", finite_positive)
             object.__setattr__(self, f.name, plain)  # frozen: stores numpy's scalars as Python's
+
+
+def history_rows(where: str, value: object) -> int:
+    """L (``WorldFacts.obs_len``, ``EnvConfig.history_len``) as a plain int in ``1..MOST_OBS_LEN``."""
+    rows = whole_number(where, value, f"an int in [1, {MOST_OBS_LEN}]", 1)
+    if rows > MOST_OBS_LEN:
+        raise SimulationError(f"{where} must be an int in [1, {MOST_OBS_LEN}], got {rows}")
+    return rows
 
 
 def finite_positive(value: float) -> bool:

@@ -24,7 +24,7 @@ from typing import Final
 import numpy as np
 
 PROGRESS: Final[float] = 0.25  # m towards the goal within the window that counts as moving (MPCConfig)
-NEVER_STEPS: Final[float] = 2.0**62  # a window longer than any episode (EnvConfig's 86400 s at MIN_DT)
+NEVER_STEPS: Final[float] = 2.0**62  # a window longer than any episode (EnvConfig's 100000 steps at most)
 
 
 class StallWatch:

@@ -8,6 +8,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Final, Literal
 
+from crowdsim.env_config import ENV_BOUNDS
+from crowdsim.orca import MAX_NEIGHBORS
+from crowdsim.world import MOST_OBS_LEN
 from mpc.config import MAX_HORIZON
 
 Kind = Literal["int", "float", "bool", "str", "ints", "strs"]
@@ -53,20 +56,21 @@ def kind_of(value: Any) -> Kind:
 
 
 # Numbers that size the work (NLP size, iterations, history rows, ORCA neighbours, episode length) are
-# bounded before anything runs; the dataclasses only require them positive. Far above any sensible value.
-# (Numbers whose huge or tiny values overflow the arithmetic are bounded by their dataclass, for every
-# caller: crowdsim.env_config.ENV_BOUNDS, OrcaParams' neighbor_dist and time_horizon; mpc.config's
-# MPC_BOUNDS and MPC_LEAST by the NLP as it is built, mpc.nlp.check_solvable.)
+# bounded before anything runs, so that the refusal names the key. Far above any sensible value. The
+# simulator's are its dataclasses' own bounds, read from crowdsim, which refuse the same values from Python
+# (the episode's steps too: EnvConfig, crowdsim.world.MOST_EPISODE_STEPS). (Numbers whose huge or tiny values
+# overflow the arithmetic are bounded by their dataclass alone, for every caller: crowdsim.env_config's
+# ENV_BOUNDS, OrcaParams' neighbor_dist and time_horizon; mpc.config's MPC_BOUNDS and MPC_LEAST by the NLP
+# as it is built, mpc.nlp.check_solvable.)
 MOST: Final[Mapping[str, float]] = {
-    "world.obs_len": 1000,
-    "env.time_limit": 3600.0,  # s: an hour-long episode
-    "env.orca.max_neighbors": 1000,
+    "world.obs_len": MOST_OBS_LEN,
+    "env.time_limit": ENV_BOUNDS["time_limit"][0],  # s
+    "env.orca.max_neighbors": MAX_NEIGHBORS,
     "mpc.horizon": MAX_HORIZON,
     "mpc.j_max": 1000,
     "mpc.solver_max_iter": 100_000,
     "mpc.time_limit_s": 3600.0,
 }
-MAX_EPISODE_STEPS: Final[int] = 100_000  # time_limit / dt
 
 
 def keys_of(obj: Any, names: tuple[str, ...], notes: Mapping[str, str], section: str) -> tuple[Key, ...]:

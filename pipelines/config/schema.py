@@ -33,7 +33,7 @@ from crowdsim.profiles import PROFILES, make_env_config
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from crowdsim.world import PAPER_ROBOTS, WorldFacts
 from mpc.config import MPCConfig
-from pipelines.config.keys import MAX_EPISODE_STEPS, MOST, Key, Section, keys_of, kind_of
+from pipelines.config.keys import MOST, Key, Section, keys_of, kind_of
 from pipelines.config.notes import ENV_NOTES, MPC_NOTES, ORCA_NOTES, WORLD_NOTES
 from pipelines.config.settings import (
     ControllerSettings,
@@ -41,7 +41,6 @@ from pipelines.config.settings import (
     SimulateSettings,
 )
 from pipelines.config.sweep_keys import build_sweep, sweep_keys
-from pipelines.errors import PipelineError
 
 # ---- [world] ---------------------------------------------------------------------------------------------
 WORLD_KEYS: Final = keys_of(WorldFacts(), tuple(f.name for f in fields(WorldFacts)), WORLD_NOTES, "world")
@@ -133,13 +132,7 @@ def _build_env(values: dict[str, Any], built: Mapping[str, Any]) -> EnvConfig:
     settings |= {name: values[name] for name in ENV_PROFILE_KEYS if values[name] is not None}
     chosen = ("robots_visible", "goal_assignment", "formation", "robot_spacing", "crowd")
     settings |= {name: values[name] for name in chosen}
-    env = EnvConfig.from_world(built["world"], orca=built["env.orca"], **settings)
-    if env.max_steps > MAX_EPISODE_STEPS:
-        raise PipelineError(
-            f"time_limit must be at most {MAX_EPISODE_STEPS} steps of dt = {env.dt:g} s, got "
-            f"{env.time_limit:g} s ({float(env.max_steps):.3g} steps)"
-        )
-    return env
+    return EnvConfig.from_world(built["world"], orca=built["env.orca"], **settings)
 
 
 # ---- [scenario] ------------------------------------------------------------------------------------------

@@ -13,6 +13,7 @@ from crowdsim.baselines import StraightController
 from crowdsim.env import CrowdEnv
 from crowdsim.env_config import ENV_BOUNDS, MIN_DT, EnvConfig
 from crowdsim.errors import SimulationError
+from crowdsim.gym_env import CrowdNavEnv
 from crowdsim.gym_reward import RewardConfig
 from crowdsim.orca import OrcaParams
 from crowdsim.profiles import PROFILES, make_env_config
@@ -49,6 +50,43 @@ def test_values_beyond_the_bounds_are_refused_in_one_compact_line(settings, mess
     with pytest.raises(SimulationError) as exc:
         EnvConfig(**settings)
     assert str(exc.value) == message
+
+
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (
+            lambda: EnvConfig(history_len=10**6),
+            "EnvConfig.history_len must be an int in [1, 1000], got 1000000",
+        ),
+        (
+            lambda: CrowdNavEnv(config={"history_len": 1001}),
+            "EnvConfig.history_len must be an int in [1, 1000], got 1001",
+        ),
+        (lambda: WorldFacts(obs_len=1001), "WorldFacts.obs_len must be an int in [1, 1000], got 1001"),
+        (
+            lambda: OrcaParams(max_neighbors=1001),
+            "OrcaParams.max_neighbors must be an int in [0, 1000], got 1001",
+        ),
+        (
+            lambda: EnvConfig(dt=0.01, time_limit=1001.01),
+            "EnvConfig.time_limit must be at most 100000 steps of dt = 0.01 s, got 1001.01 s (1e+05 steps)",
+        ),
+    ],
+)
+def test_the_sizes_of_the_work_are_bounded_from_python_as_the_cli_bounds_them(make, message):
+    """10**6 history rows took 21 s and 860 MB for three steps when only the CLI refused them: the
+    library refuses what the config schema does (pipelines.config.keys.MOST reads these bounds)."""
+    with pytest.raises(SimulationError) as exc:
+        make()
+    assert str(exc.value) == message
+
+
+def test_the_largest_sizes_of_the_work_are_accepted():
+    # paper profile, 1 s margin: steps start at k * 0.01 s < 1000 s, k = 0..99999
+    assert EnvConfig(dt=0.01, time_limit=1001.0).max_steps == 100_000
+    assert EnvConfig(history_len=1000).history_len == WorldFacts(obs_len=1000).obs_len == 1000
+    assert OrcaParams(max_neighbors=1000).max_neighbors == 1000
 
 
 def test_the_edges_of_the_closed_ranges_are_accepted():
@@ -92,7 +130,8 @@ def test_the_extremes_accepted_keep_the_straight_controller_finite():
     # so each robot lands (almost) on its goal 10 m north, at about 2 x 10 m / tau = 2.3e-4 m/s
     np.testing.assert_allclose(obs.robot_positions, obs.robot_goals, rtol=0, atol=1e-3)
     np.testing.assert_allclose(obs.robot_velocities[:, 1], 20 / tau, rtol=1e-3)
-    assert EnvConfig(dt=MIN_DT, time_limit=most["time_limit"]).max_steps > 0  # 8.6e10: still finite
+    with pytest.raises(SimulationError, match="at most 100000 steps of dt = 1e-06 s, got 86400 s"):
+        EnvConfig(dt=MIN_DT, time_limit=most["time_limit"])  # 8.6e10 steps: finite, but days of stepping
 
 
 def test_the_extremes_clip_the_acceleration_to_the_speed_bound():

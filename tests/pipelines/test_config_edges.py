@@ -18,8 +18,11 @@ from pipelines.config.entries import MAX_CONFIG_BYTES, Source
     ("setting", "message"),
     [
         ("world.dt=true", "--set world.dt: must be a finite number > 0, got True"),
-        ("world.obs_len=true", "--set world.obs_len: must be an int >= 1, got True"),
-        ("env.orca.max_neighbors=true", "--set env.orca.max_neighbors: must be an int >= 0, got True"),
+        ("world.obs_len=true", "--set world.obs_len: must be an int in \\[1, 1000\\], got True"),
+        (
+            "env.orca.max_neighbors=true",
+            "--set env.orca.max_neighbors: must be an int in \\[0, 1000\\], got True",
+        ),
     ],
 )
 def test_a_boolean_is_no_number(setting, message):
@@ -36,7 +39,7 @@ def test_the_largest_horizon_is_allowed_and_the_next_refused():
 
 def test_the_longest_episode_is_allowed_and_one_step_more_refused():
     # Paper profile, timeout margin 1 s: steps start at t = k * 0.01 < 1001 - 1 = 1000 s, k = 0..99999, so
-    # 100000 steps (MAX_EPISODE_STEPS); a 1001.01 s limit gives 100001.
+    # 100000 steps (crowdsim.world.MOST_EPISODE_STEPS); a 1001.01 s limit gives 100001.
     assert load(sets=["world.dt=0.01", "env.time_limit=1001.0"]).env.max_steps == 100_000
     with pytest.raises(ConfigError, match="must be at most 100000 steps of dt = 0.01 s, got 1001.01 s"):
         load(sets=["world.dt=0.01", "env.time_limit=1001.01"])

@@ -512,7 +512,7 @@ def test_errors_from_the_python_api_are_config_errors(tmp_path):
         (["--set", "scenario.humans=100"], "--set scenario.humans: n_humans must be in [0, 50], got 100"),
         (["--set", "mpc.horizon=100000"], "--set mpc.horizon: must be at most 100, got 100000"),
         (["--set", "mpc.j_max=1e9"], "--set mpc.j_max: must be an integer >= 1, got 1000000000.0"),
-        (["--set", "env.time_limit=1e9"], "--set env.time_limit: must be at most 3600.0, got 1000000000.0"),
+        (["--set", "env.time_limit=1e9"], "--set env.time_limit: must be at most 86400.0, got 1000000000.0"),
         # an Inf Hessian: a Fatrop solve ran past time_limit_s for minutes
         (["--set", "mpc.rho=1e300"], "--set mpc.rho: must be at most 1000 s^2, got 1e+300"),
         (
