@@ -39,6 +39,7 @@ from typing import Final
 import numpy as np
 
 from crowdsim.errors import SimulationError, real_number, whole_number
+from crowdsim.world import MOST_COORDINATE
 
 RVO_EPSILON: Final[float] = 1e-5  # RVO2's Definitions.h: tolerance for (almost) parallel lines
 # neighbor_dist is squared (1e300 overflowed the first step): a finite one up to 1000 km, far beyond any
@@ -204,6 +205,29 @@ def orca_halfplanes(
     return points, directions, valid.sum(axis=1)
 
 
+def _check_magnitudes(positions: np.ndarray, velocities: np.ndarray, pref: np.ndarray) -> None:
+    """SimulationError (a ValueError) for a NaN, an infinity or a component beyond ``MOST_COORDINATE``.
+
+    The sums of squares, three BLAS calls (a few microseconds, no floating-point warnings), settle every
+    state the simulator makes: within ``MOST_COORDINATE**2`` every component is within the bound; NaN, inf
+    or a larger sum go on to the exact test by component."""
+    most = MOST_COORDINATE
+    if np.vdot(positions, positions) + np.vdot(velocities, velocities) + np.vdot(pref, pref) <= most * most:
+        return
+    arrays = {
+        "positions": (positions, "m"),
+        "velocities": (velocities, "m/s"),
+        "pref_velocities": (pref, "m/s"),
+    }
+    for name, (values, unit) in arrays.items():
+        beyond = ~(np.abs(values) <= most)
+        if beyond.any():
+            raise SimulationError(
+                f"orca_velocities: every {name} component must be finite and within ±{most:g} {unit}, got "
+                f"{float(values[beyond][0]):g}"
+            )
+
+
 def _apart(
     rx: np.ndarray, ry: np.ndarray, dist_sq: np.ndarray, agents: np.ndarray, nbr: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -320,7 +344,9 @@ def orca_velocities(
     ``seen`` alone: a replayed person sees the robots, crowdsim.reaction);
     pref_velocities: ``(S, 2)`` for the agents in ``agents``; radii, max_speeds: scalars or ``(A,)``.
     dt is the simulation time step (used only when agents already overlap).
-    Returns ``(velocities (S, 2), used_lp3 (S,) bool)``.
+    Returns ``(velocities (S, 2), used_lp3 (S,) bool)``. SimulationError (a ValueError) for a NaN, an
+    infinity or a component beyond ``crowdsim.world.MOST_COORDINATE`` in positions, velocities or
+    pref_velocities, whose squares would overflow.
     """
     positions = np.asarray(positions, dtype=float)
     velocities = np.asarray(velocities, dtype=float)
@@ -329,6 +355,7 @@ def orca_velocities(
     radii = np.broadcast_to(np.asarray(radii, dtype=float), (n_agents,))
     max_speeds = np.broadcast_to(np.asarray(max_speeds, dtype=float), (n_agents,))[agents]
     pref = np.asarray(pref_velocities, dtype=float).reshape(len(agents), 2)
+    _check_magnitudes(positions, velocities, pref)
 
     # The 2-D program's starting point: the preferred velocity, shortened onto the max-speed disc.
     speed = np.linalg.norm(pref, axis=1)

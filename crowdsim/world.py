@@ -24,6 +24,11 @@ from crowdsim.errors import SimulationError, real_number, whole_number
 # steps, far past any predictor's observed length (TrajNet++'s 9).
 MOST_OBS_LEN: Final[int] = 1000  # L, rows of observed history
 MOST_EPISODE_STEPS: Final[int] = 100_000  # EnvConfig.max_steps: time_limit / dt
+# The largest |coordinate| (m) and |velocity component| (m/s) crowdsim.orca takes: a million km, far beyond
+# where the simulator moves anyone (MOST_SPEED x MOST_TIME = 8.6e6 m from its scene), yet so far below
+# float64's overflow that ORCA's squares of them over a microsecond's time step or horizon stay finite (1e200
+# gave inf and NaN velocities).
+MOST_COORDINATE: Final[float] = 1e9
 
 
 @dataclass(frozen=True)

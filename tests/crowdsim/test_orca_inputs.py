@@ -1,0 +1,50 @@
+"""What orca_velocities, a public function, takes: finite states within crowdsim.world.MOST_COORDINATE, the
+largest of which keep its arithmetic finite; beyond, one ValueError naming the array."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from crowdsim.orca import OrcaParams, orca_velocities
+from crowdsim.world import MOST_COORDINATE
+
+STILL = np.zeros((2, 2))
+APART = np.array([[0.0, 0.0], [1.0, 0.0]])  # two agents 1 m apart, in contact with 0.5 m radii
+
+
+@pytest.mark.parametrize(
+    "positions, velocities, pref, message",
+    [
+        (np.array([[0.0, 0.0], [1e200, 1.0]]), STILL, STILL, "positions component must be finite and within "
+         "±1e+09 m, got 1e+200"),
+        (APART, np.array([[-1e200, 0.0], [0.0, 0.0]]), STILL, "velocities component must be finite and "
+         "within ±1e+09 m/s, got -1e+200"),
+        (np.array([[0.0, 0.0], [np.nan, 1.0]]), STILL, STILL, "positions component must be finite and within "
+         "±1e+09 m, got nan"),
+        (APART, STILL, np.array([[np.inf, 0.0], [0.0, 0.0]]), "pref_velocities component must be finite and "
+         "within ±1e+09 m/s, got inf"),
+    ],
+)  # fmt: skip
+def test_absurd_states_are_refused_in_one_line_naming_the_array(positions, velocities, pref, message):
+    """Positions and velocities near 1e200 overflowed ORCA's squares: RuntimeWarnings, inf and NaN out."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError) as exc:
+            orca_velocities(positions, velocities, pref, 0.5, 1.0, OrcaParams(), 0.4)
+    assert str(exc.value) == f"orca_velocities: every {message}"
+
+
+@pytest.mark.parametrize("dt", [1e-6, 0.4, 86_400.0])
+def test_the_largest_states_accepted_give_finite_velocities(dt):
+    """Agents at the bound, heading at one another at the bound, two of them overlapping, with the least
+    time horizon and every agent a neighbour: no warning, finite velocities within the max speed."""
+    most = MOST_COORDINATE
+    positions = np.array([[most, most], [most - 0.1, most], [-most, -most]])
+    velocities = np.array([[-most, -most], [most, most], [most, -most]])
+    pref = np.array([[most, -most], [-most, most], [most, most]])
+    params = OrcaParams(neighbor_dist=float("inf"), time_horizon=1e-6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        new, _ = orca_velocities(positions, velocities, pref, 10.0, 100.0, params, dt)
+    assert np.isfinite(new).all() and (np.linalg.norm(new, axis=1) <= 100.0 * (1 + 1e-9)).all()
