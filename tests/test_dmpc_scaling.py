@@ -115,3 +115,22 @@ def test_a_serial_step_cut_by_the_time_limit_is_no_difference_and_is_said(monkey
     monkeypatch.setattr(dmpc_scaling, "cell_report", lambda rows, same, cut=0: {"same": same, "cut": cut})
     cell = dmpc_scaling.closed_loop(2, 1, "jacobi:regret", ["serial", "threads"], 1)
     assert (cell["same"], cell["cut"]) == (True, 1)
+
+
+def _solution(accels: float, status: str = "Solve_Succeeded"):
+    from mpc.solvers import Solution
+
+    return Solution(np.full((2, 2), accels), accels, status, True, 3, "fatrop", np.zeros(1), np.zeros(1))
+
+
+def test_replayed_solves_past_the_time_limit_are_left_out_and_counted():
+    """--replay compared every solve bit for bit, one the clock ended (past time_limit_s in one path) too,
+    where the closed loop's comparison stops at such a step: the load could make it report a difference."""
+    serial = [_solution(1.0), _solution(2.0, "Maximum_WallTime_Exceeded")]
+    assert dmpc_scaling.same_within_limit(serial, [_solution(1.0), _solution(2.5)]) == (True, 1)
+    assert dmpc_scaling.same_within_limit(
+        [_solution(1.0), _solution(2.0)], [_solution(1.0), _solution(2.5, "Maximum_WallTime_Exceeded")]
+    ) == (True, 1)
+    # a solve within the limit in both must still agree bit for bit
+    assert dmpc_scaling.same_within_limit(serial, [_solution(1.5), _solution(2.5)]) == (False, 1)
+    assert dmpc_scaling.same_within_limit([_solution(1.0)], [_solution(1.0)]) == (True, 0)
