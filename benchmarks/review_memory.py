@@ -33,6 +33,7 @@ from pipelines.loop.episode import run_episode
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
+    check_distinct,
     count_in,
     episode_count,
     human_count,
@@ -125,6 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=output_file, help="also write the rows to this file")
     args = parser.parse_args(argv)
     with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        check_distinct(parser, "--files", args.files)
         if (
             min(args.files) < args.episodes
         ):  # the folder holds every recorded episode: the row would mislabel it
@@ -151,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
                 "MB a file",
             )  # held, above the interpreter's
             print(" ".join(f"{h:>{w}}" for h, w in zip(head, (6, 10, 9, 12, 7, 10), strict=True)))
-            for files in sorted(set(args.files)):
+            for files in sorted(args.files):  # the folder only grows
                 fill(folder, sources, files)
                 review_mb, review_s, _ = peak(REVIEW, str(folder), str(Path(tmp) / "r.json"))
                 held_mb, held_s, _ = peak(HOLD_ALL, str(folder))

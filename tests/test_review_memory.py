@@ -55,3 +55,13 @@ def test_a_childs_peak_is_its_own_not_this_processs():
     assert read_from in review_memory.PEAK_SOURCES
     if read_from == "VmHWM":  # Linux; with ru_maxrss alone (no /proc) the floor is what the header says
         assert 0 < mb < 128  # a bare interpreter: tens of MB
+
+
+def test_a_repeated_file_count_is_refused_as_the_other_benchmarks_refuse_it(capsys):
+    """--files 20 20 measured 20 once and said nothing; the other benchmarks' lists refuse a repeat."""
+    import pytest
+
+    with pytest.raises(SystemExit) as stop:
+        review_memory.main(["--files", "4", "6", "4", "--episodes", "1"])
+    assert stop.value.code == 2
+    assert "--files names 4 more than once" in capsys.readouterr().err
