@@ -7,7 +7,10 @@ each robot meets the one opposite it exactly head-on. Each row runs one controll
 show both the exact layout and the ones a real team would see. ``--humans N`` adds people by the paper's
 crossing rules (``--scenario``: circle or perpendicular, each placed clear of the robots' starts and goals,
 drawn from the episode's seed). It prints success, travel time, the closest two robots came (centres; 2 x
-radius is contact), robot-human collisions (< 0.8 m, Table I's) and the time-outs.
+radius is contact), robot-human collisions (< 0.8 m, Table I's), the time-outs and, among them, the
+deadlocks (no robot moved 5 cm in the last 10 s): two robots in the exact swap deadlock under every
+controller unless ``--jitter`` moves the tie (ORCA) or ``--mpc flock_range=2`` lets them out of Eq. 15 (the
+MPCs; with the jitter alone the flocking pair arrives together at one goal, then the other).
 
     nice -n 5 .venv/bin/python benchmarks/robot_swaps.py --robots 2 3 4 6 --controllers cmpc dmpc orca
     nice -n 5 .venv/bin/python benchmarks/robot_swaps.py --robots 2 4 --jitter 0.05 --episodes 10 \\
@@ -23,7 +26,7 @@ import math
 import sys
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 import gymnasium as gym
 import numpy as np
@@ -56,6 +59,17 @@ from bench_cli import (  # noqa: E402
 
 CONTROLLERS = ("cmpc", "dmpc", "orca")
 MAX_JITTER = 0.5  # m per coordinate; main() refuses a circle too small for its robots so moved
+# A time-out in which no robot moved STILL_M in the episode's last STILL_S is a deadlock, not a slow arrival:
+# the exact swap of two robots ends so, the MPCs' pair held 1.42 m apart in the middle by Eq. 15 (their goal
+# pulls cancel to the last bit) and ORCA's pair face to face, each to the millimetre.
+STILL_S: Final[float] = 10.0  # s, a quarter of the 40 s episode
+STILL_M: Final[float] = 0.05  # m in STILL_S: 0.5 % of walking at v_pref (1 m/s)
+DEADLOCK_NOTE = (
+    "deadlock: timed out with no robot moving {still_m:g} m in the last {still_s:g} s. In the exact swap of "
+    "two robots ORCA's pair meets head-on and stops, and Eq. 15 (every pair flocking) holds the MPCs' pair "
+    "together in the middle, their goal pulls cancelling: --jitter moves the tie, --mpc flock_range=2 frees "
+    "them"
+)
 
 
 def antipodal(
@@ -106,13 +120,15 @@ def run_row(
         for i in episode_bar(args.episodes, f"{controller} M={n_robots}"):
             rng = np.random.default_rng(args.seed + i)
             layout = antipodal(n_robots, args.radius, args.jitter, rng, args.humans, args.scenario)
-            m = run_gym_episode(policy, env, seed=args.seed + i, options={"layout": layout}).metrics
-            outcomes.append((m.success, m.travel_time, m.min_distance_robots, m.collision, m.timeout))
+            result = run_gym_episode(policy, env, seed=args.seed + i, options={"layout": layout})
+            m = result.metrics
+            still = m.timeout and stood_still(result.robot_positions, config.dt)
+            outcomes.append((m.success, m.travel_time, m.min_distance_robots, m.collision, m.timeout, still))
     finally:
         policy.close()
         env.close()
     columns = (np.array(column, dtype=float) for column in zip(*outcomes, strict=True))
-    success, travel, closest, collision, timeout = columns
+    success, travel, closest, collision, timeout, deadlock = columns
     return {
         "controller": controller,
         "robots": n_robots,
@@ -125,25 +141,37 @@ def run_row(
         "humans": args.humans,
         "collision_rate": 100 * float(collision.mean()),
         "timeout_rate": 100 * float(timeout.mean()),
+        "deadlock_rate": 100 * float(deadlock.mean()),
     }
+
+
+def stood_still(positions: np.ndarray, dt: float) -> bool:
+    """Whether no robot of ``positions`` ``(T+1, M, 2)`` m moved ``STILL_M`` over the last ``STILL_S``."""
+    steps = round(STILL_S / dt)
+    if len(positions) <= steps:
+        return False
+    moved = np.linalg.norm(positions[-1] - positions[-1 - steps], axis=-1)
+    return bool(np.all(moved < STILL_M))
 
 
 def print_rows(rows: list[dict[str, Any]], radius: float) -> None:
     print(
         f"{'controller':10s} {'M':>3s} {'eps':>4s} {'success':>8s} {'travel s':>9s} {'closest m':>10s} "
-        f"{'contact':>8s} {'N':>3s} {'collision':>9s} {'timeout':>8s}"
+        f"{'contact':>8s} {'N':>3s} {'collision':>9s} {'timeout':>8s} {'deadlock':>9s}"
     )
     for r in rows:
         travel = "n/a" if math.isnan(r["travel_time_mean"]) else f"{r['travel_time_mean']:.1f}"
         print(
             f"{r['controller']:10s} {r['robots']:3d} {r['episodes']:4d} {r['success_rate']:7.0f}% "
             f"{travel:>9s} {r['min_robot_distance']:10.2f} {r['contact_rate']:7.0f}% {r['humans']:3d} "
-            f"{r['collision_rate']:8.0f}% {r['timeout_rate']:7.0f}%"
+            f"{r['collision_rate']:8.0f}% {r['timeout_rate']:7.0f}% {r['deadlock_rate']:8.0f}%"
         )
     print(
         f"(closest: the smallest centre distance of two robots in the row; contact below {2 * radius:g} m; "
         "collision: a robot within 0.8 m of a person)"
     )
+    if any(r["deadlock_rate"] for r in rows):
+        print(f"({DEADLOCK_NOTE.format(still_m=STILL_M, still_s=STILL_S)})")
 
 
 def jitter_metres(text: str) -> float:

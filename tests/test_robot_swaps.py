@@ -109,3 +109,30 @@ def test_bad_options_are_refused_when_parsed(argv, message, capsys):
         robot_swaps.main(argv)
     assert stop.value.code == 2
     assert message in capsys.readouterr().err
+
+
+def test_standing_still_is_read_over_the_last_ten_seconds_by_hand():
+    """At dt 0.4 s the last 10 s are 25 steps: robots 4 cm from where they stood 25 steps before stood still,
+    6 cm did not, and an episode shorter than 10 s is no deadlock."""
+    path = np.zeros((40, 2, 2))
+    path[-1, 1, 0] = 0.04
+    assert robot_swaps.stood_still(path, 0.4)
+    path[-1, 1, 0] = 0.06
+    assert not robot_swaps.stood_still(path, 0.4)
+    path[:-26] = 5.0  # moved before the last 25 steps: still
+    path[-1, 1, 0] = 0.0
+    assert robot_swaps.stood_still(path, 0.4)
+    assert not robot_swaps.stood_still(np.zeros((25, 2, 2)), 0.4)
+
+
+def test_the_exact_swap_with_every_pair_flocking_is_said_to_be_a_deadlock(tmp_path, capsys):
+    """At its defaults two robots swapping places timed out and the row said only that: Eq. 15 holds them
+    1.42 m apart in the middle, their goal pulls cancelling exactly, for the rest of the episode."""
+    out = tmp_path / "rows.json"
+    robot_swaps.main(["--robots", "2", "--controllers", "cmpc", "--json", str(out)])
+    (row,) = json.loads(out.read_text(encoding="utf-8"))["rows"]
+    assert row["timeout_rate"] == 100.0 and row["deadlock_rate"] == 100.0
+    printed = capsys.readouterr().out
+    assert "100%      100%" in printed.splitlines()[1]
+    assert "deadlock: timed out with no robot moving 0.05 m in the last 10 s" in printed
+    assert "--mpc flock_range=2 frees them" in printed
