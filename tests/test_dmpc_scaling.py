@@ -69,7 +69,7 @@ def test_the_threads_speed_up_is_labelled_serial_over_threads(capsys):
     speedup = report["cells"]["r3 jacobi:regret"]["speedup"]
     assert speedup == {"step_median": pytest.approx(0.82), "phase": pytest.approx(1.5)}
     args = argparse.Namespace(humans=7, episodes=1)
-    dmpc_scaling._print_report(report, args, ())
+    dmpc_scaling.print_report(report, args, dmpc_scaling.PREDICTOR, ())
     line = capsys.readouterr().out.splitlines()[-1]
     assert "speed-up (serial / threads): step median x0.82, phase x1.50, same trajectories: True" in line
     assert "threads/serial" not in line
