@@ -148,3 +148,16 @@ def _held_metadata(path: Path) -> dict[str, dict[str, str]] | None:
         return read_metadata(path)
     except PipelineError:
         return None
+
+
+def null_none(value: str | None) -> str | None:
+    return None if value in (None, "", "null") else value
+
+
+def recorded_plugins(value: str | None) -> dict[str, Any] | None:
+    """The recorded plugins' code (JSON in the metadata), None where absent or not a JSON object."""
+    try:
+        plugins = json.loads(value) if value else None
+    except ValueError:  # a hand-edited file: no code named
+        return None
+    return plugins if isinstance(plugins, dict) else None

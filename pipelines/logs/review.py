@@ -8,7 +8,6 @@ runs are crowdsim's own aggregate, over the runs whose episode ended. The schema
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections import Counter
@@ -19,7 +18,8 @@ from typing import Any, Final
 
 import numpy as np
 
-from pipelines.logs.identity import differing_settings, shown
+from pipelines.logs.ending import ended_by, metric_rows
+from pipelines.logs.identity import differing_settings, null_none, recorded_plugins, shown
 from pipelines.logs.reader import Recording
 from pipelines.loop.record import step_time_stats
 from pipelines.version import dirty_text
@@ -45,7 +45,9 @@ def _solver_stats(rec: Recording) -> dict[str, Any]:
 
 def summarize(rec: Recording) -> dict[str, Any]:
     ep = rec.episode()
+    code = rec.metadata.get("crowdmpc", {})
     metrics_messages = rec.data("/episode/metrics")
+    metrics = metrics_messages[-1]["metrics"] if metrics_messages else None
     robots = rec.data("/robots")
     return {
         "file": str(rec.path),
@@ -56,21 +58,21 @@ def summarize(rec: Recording) -> dict[str, Any]:
         "predictor_sha256": ep.get("predictor_sha256") or None,
         "n_robots": int(ep["n_robots"]) if "n_robots" in ep else None,
         "n_humans": int(ep["n_humans"]) if "n_humans" in ep else None,
-        "crowdmpc_version": rec.metadata.get("crowdmpc", {}).get("version"),
+        "crowdmpc_version": code.get("version"),
         # the commit that recorded it ("null" for a copy without git history; absent in older recordings)
-        "crowdmpc_commit": rec.metadata.get("crowdmpc", {}).get("commit"),
+        "crowdmpc_commit": code.get("commit"),
         # recorded from a tree with uncommitted changes: the commit alone does not name its code
-        "crowdmpc_dirty": {"true": True, "false": False}.get(
-            rec.metadata.get("crowdmpc", {}).get("dirty", "")
-        ),
+        "crowdmpc_dirty": {"true": True, "false": False}.get(code.get("dirty", "")),
         # which uncommitted changes (the sha256 of their diff; "null" when clean, absent in older recordings)
-        "crowdmpc_diff_sha256": _null_none(rec.metadata.get("crowdmpc", {}).get("diff_sha256")),
+        "crowdmpc_diff_sha256": null_none(code.get("diff_sha256")),
         # the plugins' code (module:Class -> its file's sha256); None without plugins and in older recordings
-        "crowdmpc_plugins": _plugins(rec.metadata.get("crowdmpc", {}).get("plugins")),
+        "crowdmpc_plugins": recorded_plugins(code.get("plugins")),
         "states": len(robots),
         "sim_time_s": robots[-1]["time"] if robots else 0.0,
         "started": _wall_clock(rec.start_time_ns),
-        "metrics": metrics_messages[-1]["metrics"] if metrics_messages else None,
+        "metrics": metrics,
+        # what ended it (pipelines.logs.ending): the metrics' timeout is "not success", whatever ended it
+        "ended_by": ended_by(rec, metrics),
         "solver": _solver_stats(rec),
         "messages": {topic: len(msgs) for topic, msgs in sorted(rec.messages.items())},
         "truncated": rec.truncated,
@@ -113,19 +115,6 @@ def count(n: Any, noun: str) -> str:
     return f"{_fmt(n)} {noun}" + ("" if str(n) == "1" else "s")
 
 
-def _null_none(value: str | None) -> str | None:
-    return None if value in (None, "", "null") else value
-
-
-def _plugins(value: str | None) -> dict[str, Any] | None:
-    """The recorded plugins' code (JSON in the metadata), None where absent or not a JSON object."""
-    try:
-        plugins = json.loads(value) if value else None
-    except ValueError:  # a hand-edited file: no code named
-        return None
-    return plugins if isinstance(plugins, dict) else None
-
-
 def commit_shown(summary: dict[str, Any]) -> str | None:
     """The recording's commit as ``crowdmpc compare`` names code ("c28989d46c28+dirty": recorded from a tree
     with uncommitted changes, which the commit alone does not name); None where it names none."""
@@ -166,7 +155,7 @@ def format_summary(summary: dict[str, Any]) -> str:
     if metrics is None:
         rows.append(("metrics", "missing (the episode did not end in this file)"))
     else:
-        rows.extend((f"  {name}", value) for name, value in metrics.items())
+        rows += metric_rows(summary)
     if s["steps"]:
         rows += [
             (

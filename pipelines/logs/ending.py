@@ -1,0 +1,106 @@
+"""What ended a recorded episode, told from its metrics, its config and its last recorded step.
+
+The metrics' ``timeout`` is "not success" (crowdsim.metrics; Table II's timeout rate counts it so), which
+``crowdmpc simulate`` and the sweeps make the same as "the time limit ended it": their episodes end only at
+success or at the time limit. A gymnasium episode may end otherwise: a robot-human contact with
+``end_on_collision=True``, or a loop of its own that stops early (gymnasium's ``TimeLimit`` put around the
+environment, a policy that raised and ``ObserveEpisodes`` closed). The review names that end beside the
+metric, which stays as recorded.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Final
+
+import numpy as np
+
+from crowdsim.distances import min_distance_between_steps
+from crowdsim.env_config import EnvConfig
+from crowdsim.errors import SimulationError
+from pipelines.errors import PipelineError
+from pipelines.logs.reader import Recording
+
+SUCCESS: Final[str] = "success"
+TIME_LIMIT: Final[str] = "time_limit"
+CONTACT: Final[str] = "contact"  # a robot touched a human in the last step, before the time limit
+CUT_SHORT: Final[str] = "cut_short"  # stopped before the time limit by whoever stepped it
+
+
+def max_steps(rec: Recording) -> int | None:
+    """The steps the recorded environment runs before its time limit; None where its config does not say
+    (a file without the "config" metadata's env, or values the simulator refuses)."""
+    env = rec.config().get("env")
+    if not isinstance(env, dict):
+        return None
+    try:
+        fields = {k: float(env[k]) for k in ("dt", "time_limit", "timeout_margin")}
+        return EnvConfig(**fields).max_steps  # type: ignore[arg-type]
+    except (KeyError, TypeError, ValueError, SimulationError):
+        return None
+
+
+def ended_by(rec: Recording, metrics: dict[str, Any] | None) -> str | None:
+    """``SUCCESS``, ``TIME_LIMIT``, ``CONTACT`` or ``CUT_SHORT``; None where the episode did not end in the
+    file or what ended it cannot be told (no time limit recorded, no states to look at)."""
+    if not isinstance(metrics, dict):
+        return None
+    if metrics.get("success") is True:
+        return SUCCESS
+    steps, limit = metrics.get("n_steps"), max_steps(rec)
+    if not isinstance(steps, int) or limit is None:
+        return None
+    if steps >= limit:
+        return TIME_LIMIT
+    touched = _last_step_contact(rec)
+    if touched is None:
+        return None
+    # an earlier contact does not end an episode; one in its last step does (end_on_collision)
+    return CONTACT if touched else CUT_SHORT
+
+
+def _last_step_contact(rec: Recording) -> bool | None:
+    """Whether a robot touched a human during the last recorded step (straight motion within it, as the
+    environment's end_on_collision takes it); None without two recorded states."""
+    from pipelines.logs.view import episode_view
+
+    try:
+        view = episode_view(rec)
+    except PipelineError:
+        return None
+    if len(view.steps) < 2:
+        return None
+    robots, humans = view.robot_positions[-2:], view.human_positions[-2:]
+    present = ~np.isnan(humans).any(axis=-1)  # a replayed crowd's untracked people are not there
+    closest = min_distance_between_steps(robots, np.nan_to_num(humans), present)
+    return math.isfinite(closest) and closest < 2.0 * view.radius
+
+
+def metric_rows(summary: dict[str, Any]) -> list[tuple[str, Any]]:
+    """The text review's rows of an ended episode: what ended it, then each recorded metric."""
+    end = summary.get("ended_by")
+    rows: list[tuple[str, Any]] = [("ended", ending_text(summary))]
+    return rows + [(f"  {name}", metric_shown(name, v, end)) for name, v in summary["metrics"].items()]
+
+
+def ending_text(summary: dict[str, Any]) -> str | None:
+    """The text review's "ended" row: what ended the episode and when; None where unknown."""
+    end = summary.get("ended_by")
+    at = f"at {summary['sim_time_s']:.1f} s"
+    if end == SUCCESS:
+        return f"success {at}"
+    if end == TIME_LIMIT:
+        return f"time limit {at}"
+    if end == CONTACT:
+        return f"robot-human contact {at}, before the time limit"
+    if end == CUT_SHORT:
+        return f"stopped {at} by its loop, before the time limit (no success, no contact in its last step)"
+    return None
+
+
+def metric_shown(name: str, value: Any, end: str | None) -> Any:
+    """A metric as the text review shows it: ``timeout`` of an episode that something else than the time limit
+    ended says so beside the recorded value, which stays the metric (not success)."""
+    if name == "timeout" and value is True and end in (CONTACT, CUT_SHORT):
+        return "yes (the metric: not success; the time limit did not end it)"
+    return value

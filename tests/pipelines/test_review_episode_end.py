@@ -1,0 +1,85 @@
+"""What `crowdmpc review` says ended a gymnasium episode: the metrics' timeout is "not success" (Table II's),
+so an episode that a contact (end_on_collision) or its own loop ended before the time limit read "timeout
+yes" as if the time limit had ended it."""
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import crowdsim  # noqa: F401  (registers the environment)
+from crowdsim.gym_env import POSITION, PRESENT
+from crowdsim.gym_wrappers import VelocityControl
+from pipelines.cli import main
+from pipelines.logs.reader import read_recording
+from pipelines.logs.recording import McapEpisodeRecorder
+from pipelines.logs.review import format_summary, summarize
+from pipelines.loop.gym_loop import ObserveEpisodes
+
+
+def _record(out, policy, *, end_on_collision=False, step_limit=None):
+    """One episode of seed 1 with 3 robots among 5 humans who do not see them, recorded; its file."""
+    base = gym.make(
+        "crowdmpc/CrowdNav-v0",
+        config={"visibility": "invisible"},
+        n_humans=5,
+        end_on_collision=end_on_collision,
+    )
+    with McapEpisodeRecorder(out) as recorder:
+        env = ObserveEpisodes(base, [recorder], controller="test_policy")
+        if step_limit is not None:
+            env = gym.wrappers.TimeLimit(env, max_episode_steps=step_limit)
+        env = VelocityControl(env)
+        obs, info = env.reset(seed=1)
+        rows, n = base.unwrapped.max_robots, info["n_robots"]
+        done = False
+        while not done:
+            velocities = np.zeros((rows, 2))
+            velocities[:n] = policy(obs[:n], obs[rows:][obs[rows:, PRESENT] == 1])
+            obs, _, terminated, truncated, info = env.step(velocities)
+            done = terminated or truncated
+        env.close()
+    (path,) = recorder.paths
+    return path
+
+
+def _chase(robots, humans):  # every robot heads for the first human
+    return np.clip(humans[0, POSITION] - robots[:, POSITION], -1.0, 1.0)
+
+
+def _stand(robots, humans):
+    return np.zeros((len(robots), 2))
+
+
+@pytest.mark.parametrize(
+    ("policy", "options", "ended", "timeout_row"),
+    [
+        (_chase, {"end_on_collision": True}, "contact", "yes (the metric: not success; the time limit"),
+        (_stand, {"step_limit": 5}, "cut_short", "yes (the metric: not success; the time limit"),
+        (_stand, {}, "time_limit", "yes\n"),
+    ],
+)
+def test_review_names_what_ended_the_episode(tmp_path, capsys, policy, options, ended, timeout_row):
+    path = _record(tmp_path / "runs", policy, **options)
+    summary = summarize(read_recording(path))
+    assert summary["ended_by"] == ended
+    assert summary["metrics"]["timeout"] is True  # the recorded metric, as the sweeps count it
+    text = format_summary(summary)
+    assert f"  timeout                            {timeout_row}" in text + "\n"
+    assert main(["review", str(path), "--json", str(tmp_path / "r.json")]) == 0
+    assert json.loads((tmp_path / "r.json").read_text())["summary"]["ended_by"] == ended
+    (row,) = [line for line in capsys.readouterr().out.splitlines() if line.startswith("ended ")]
+    said = {
+        "contact": "robot-human contact at 5.2 s, before the time limit",
+        "cut_short": "stopped at 2.0 s by its loop, before the time limit",
+        "time_limit": "time limit at 39.2 s",
+    }
+    assert row.split(None, 1)[1].startswith(said[ended])
+
+
+def test_a_success_is_said_as_such(tmp_path):
+    goal = lambda robots, humans: np.clip(robots[:, 4:6] - robots[:, POSITION], -1.0, 1.0)  # noqa: E731
+    summary = summarize(read_recording(_record(tmp_path / "runs", goal)))
+    assert summary["ended_by"] == "success" and summary["metrics"]["timeout"] is False
+    assert "ended                                success at 10.4 s" in format_summary(summary)
