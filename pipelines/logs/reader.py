@@ -13,8 +13,8 @@ count log time from 0. Either way ``Recording.sim_seconds`` gives the simulation
 every place (warnings, problems) names a message by it.
 
 Nothing in a file raises past ``read_recording`` except a file that is not a recording at all (missing, a
-folder, empty, not MCAP, no complete header, another program's MCAP file (``_Walk.foreign``), no metadata
-record and no message read): a bad chunk, a message that is not JSON or lacks what the review reads
+folder, empty, not MCAP, no complete header, another program's MCAP file (``pipelines.logs.foreign``), no
+metadata record and no message read): a bad chunk, a message that is not JSON or lacks what the review reads
 (``pipelines.logs.shapes``), a bad metadata value or a corrupt record becomes a line of ``Recording.problems``
 or of ``LoggedMessage.problem``, and the messages it held are left out.
 """
@@ -34,9 +34,10 @@ from mcap.records import Chunk, Header, McapRecord, Message, Metadata, Schema, S
 from mcap.stream_reader import breakup_chunk
 
 from pipelines.errors import PipelineError
+from pipelines.logs.foreign import not_a_recording
 from pipelines.logs.mcap_file import reason, statistics_problem, walk_file
 from pipelines.logs.recorder import UNFINISHED_SUFFIX
-from pipelines.logs.schemas import CHANNELS, EPISODE_FORMAT, LIBRARY, METADATA_NAMES
+from pipelines.logs.schemas import EPISODE_FORMAT
 from pipelines.logs.shapes import episode_metadata_problems, message_problem
 from predictors.errors import short_repr
 
@@ -253,23 +254,12 @@ class _Walk:
         return sum(self._read.values())
 
     def foreign(self) -> str | None:
-        """Why the file is another program's MCAP file, not a crowdmpc recording: its header names another
-        library and it holds none of a recording's metadata records or topics (a recording whose header is
-        damaged still holds those); None for a recording, and for a file that holds nothing to tell."""
-        topics = sorted({channel.topic for channel in self._channels.values()})
-        if self._library == LIBRARY or CHANNELS.keys() & topics or METADATA_NAMES & self.metadata.keys():
-            return None
-        if self._library is None and not topics and not self.metadata:
-            return None
-        held = [
-            f"{what}{'s' * (len(names) != 1)} {', '.join(map(repr, names[:3]))}"
-            + (f" and {len(names) - 3} more" if len(names) > 3 else "")
-            for what, names in (("topic", topics), ("metadata record", sorted(self.metadata)))
-            if names
-        ]
-        by = f"written by {self._library!r}" if self._library is not None else "its header unread"
-        what = f"holds {'; '.join(held)}, none of an episode's" if held else "holds nothing"
-        return f"is an MCAP file but not a crowdmpc recording ({by}; it {what})"
+        """Why the file is another program's MCAP file (``pipelines.logs.foreign``); None for a recording."""
+        schemas = {
+            self._schemas[c.schema_id].name for c in self._channels.values() if c.schema_id in self._schemas
+        }
+        topics = {channel.topic for channel in self._channels.values()}
+        return not_a_recording(self._library, schemas, topics, self.metadata.keys())
 
     def finish(self) -> None:
         """The messages read against the Statistics record's counts; messages whose channel came later (the

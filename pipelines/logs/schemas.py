@@ -22,10 +22,10 @@ MESSAGE_ENCODING: Final[str] = "json"
 # start_time_ns + simulation time (before: simulation time from 0). The reader flags a file of another.
 EPISODE_FORMAT: Final[str] = "crowdmpc-episode/3"
 # The library its header names, as every recording since the first: the reader tells another program's
-# MCAP file by it (with the metadata and topics, which a file whose header is damaged still holds).
+# MCAP file by it (or, where a header is damaged, by the "crowdmpc" metadata record and our schemas).
 LIBRARY: Final[str] = "crowdmpc"
-# The metadata records an episode file holds (pipelines.logs.recording).
-METADATA_NAMES: Final[frozenset[str]] = frozenset({"crowdmpc", "episode", "config", "run"})
+# The start of our schemas' names ("crowdmpc.Robots"), which no other program's schema has.
+SCHEMA_PREFIX: Final[str] = "crowdmpc."
 
 
 @dataclass(frozen=True, eq=False)

@@ -156,7 +156,7 @@ def test_a_metrics_message_the_review_cannot_use_is_named(recorded, tmp_path, ca
     shutil.copytree(recorded / "rec", folder)
     with (folder / "odd.mcap").open("wb") as f:
         writer = Writer(f)
-        writer.start()
+        writer.start(library="crowdmpc")  # a recording's, whose metrics message is not one
         schema = writer.register_schema("metrics", "jsonschema", b"{}")
         channel = writer.register_channel("/episode/metrics", "json", schema)
         writer.add_message(channel, 0, b'{"metrics": 1}', 0)

@@ -257,20 +257,28 @@ def test_a_device_or_a_pipe_is_named_as_no_regular_file(tmp_path, capsys):
     assert capsys.readouterr().err.endswith("missing.mcap: no such recording\n")
 
 
-def _other_programs_file(path, topics=("/foo",), metadata=()):
+def _other_programs_file(path, topics=("/foo",), metadata=(), schema="Foo", library="other"):
     from mcap.writer import Writer
 
     with path.open("wb") as f:
         writer = Writer(f)
-        writer.start(profile="", library="other")
-        schema = writer.register_schema("Foo", "jsonschema", b'{"type": "object"}')
+        writer.start(profile="", library=library)
+        schema_id = writer.register_schema(schema, "jsonschema", b'{"type": "object"}')
         for name in metadata:
             writer.add_metadata(name, {"k": "v"})
         for topic in topics:
-            channel = writer.register_channel(topic, "json", schema)
+            channel = writer.register_channel(topic, "json", schema_id)
             for k in range(5):
                 writer.add_message(channel, log_time=k, data=json.dumps({"x": k}).encode(), publish_time=k)
         writer.finish()
+
+
+def _not_a_recording(path, holds):
+    return (
+        f"{path} is an MCAP file but not a crowdmpc recording: its header names library 'other', where a "
+        f"recording's names 'crowdmpc', and it holds {holds}, but no 'crowdmpc' metadata record nor a "
+        "crowdmpc.* schema"
+    )
 
 
 def test_another_programs_mcap_file_is_no_recording(runs, tmp_path, capsys):
@@ -278,22 +286,22 @@ def test_another_programs_mcap_file_is_no_recording(runs, tmp_path, capsys):
     under --check, "5 messages, ok", exit 0, and in a folder a row counted among its runs."""
     path = tmp_path / "other.mcap"
     _other_programs_file(path)
+    foo = "topic '/foo'"
     for check in ([], ["--check"]):
         assert main(["review", str(path), *check]) == 2
         out, err = capsys.readouterr()
-        assert out == "" and err == (
-            f"crowdmpc review: error: {path} is an MCAP file but not a crowdmpc recording (written by "
-            "'other'; it holds topic '/foo', none of an episode's)\n"
-        )
+        assert out == "" and err == f"crowdmpc review: error: {_not_a_recording(path, foo)}\n"
     many = tmp_path / "many.mcap"
     _other_programs_file(many, topics=("/a", "/b", "/c", "/d"), metadata=("m",))
-    with pytest.raises(PipelineError, match=r"topics '/a', '/b', '/c' and 1 more; metadata record 'm', none"):
+    with pytest.raises(PipelineError, match=r"topics '/a', '/b', '/c' and 1 more; metadata record 'm', but"):
         read_recording(many)
-    # one of a recording's topics or metadata records is a crowdmpc file's, whatever program wrote it
-    _other_programs_file(path, topics=("/foo", "/robots"))
+    # what only a recording carries makes one, whatever program wrote the rest
+    _other_programs_file(path, library="crowdmpc")
+    assert read_recording(path).channels.keys() == {"/foo"}
+    _other_programs_file(path, topics=("/foo", "/robots"), schema="crowdmpc.Robots")
     assert read_recording(path).channels.keys() == {"/foo", "/robots"}
-    _other_programs_file(path, metadata=("episode",))
-    assert read_recording(path).metadata == {"episode": {"k": "v"}}
+    _other_programs_file(path, metadata=("crowdmpc",))
+    assert read_recording(path).metadata == {"crowdmpc": {"k": "v"}}
 
     folder = tmp_path / "folder"
     folder.mkdir()
@@ -304,6 +312,22 @@ def test_another_programs_mcap_file_is_no_recording(runs, tmp_path, capsys):
     assert "\n1 run\n" in out and "other.mcap" not in out
     assert f"crowdmpc review: unreadable: {folder / 'other.mcap'} is an MCAP file but not a crowdmpc " in err
     assert main(["review", str(folder), "--check"]) == 1
+
+
+def test_a_file_with_a_recordings_topic_or_metadata_names_alone_is_no_recording(runs, tmp_path, capsys):
+    """Another program's file with a /scene of its own (a topic name many write), or a metadata record named
+    "episode", counted as a crowdmpc recording: review printed a table of dashes with exit 0, compare said its
+    episode did not finish."""
+    path = tmp_path / "scene.mcap"
+    _other_programs_file(path, topics=("/scene",), schema="foxglove.SceneUpdate")
+    refused = _not_a_recording(path, "topic '/scene'")
+    assert main(["review", str(path)]) == 2
+    assert capsys.readouterr().err == f"crowdmpc review: error: {refused}\n"
+    assert main(["compare", str(path), str(runs[0].path)]) == 2
+    assert capsys.readouterr().err.endswith(f"{refused}\n")
+    _other_programs_file(path, topics=(), metadata=("episode",))
+    with pytest.raises(PipelineError, match="it holds metadata record 'episode', but no 'crowdmpc' metadata"):
+        read_recording(path)
 
 
 def test_a_folder_of_run_folders_is_reviewed_one_and_two_levels_down(runs, tmp_path, capsys):
