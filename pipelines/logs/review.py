@@ -199,6 +199,7 @@ def aggregate_table(
         "controller",
         "predictor",
         *_RUN_COLUMNS,
+        "ended",  # what ended it: the timeout column is the metric, not success
         "median ms",
         "p95 ms",
         "fallbacks",
@@ -210,6 +211,7 @@ def aggregate_table(
             s["controller"],
             s["predictor"],
             *((s["metrics"] or {}).get(c) for c in _RUN_COLUMNS),
+            s.get("ended_by"),
             s["solver"].get("median_ms"),
             s["solver"].get("p95_ms"),
             sum(s["solver"].get("fallbacks", {}).values()),
@@ -369,6 +371,7 @@ def compare_table(a: Recording, b: Recording) -> str:
         ["crowdmpc", _code(sa), _code(sb)],  # a run before an upgrade beside one after it: which is which
     ]
     rows += [[key, shown(va), shown(vb)] for key, va, vb in differing_settings(a, b)]
+    rows.append(["ended", sa["ended_by"], sb["ended_by"]])
     rows += [[name, ma.get(name), mb.get(name)] for name in dict.fromkeys([*ma, *mb])]
     for key in ("median_ms", "p95_ms", "max_ms", "mean_iterations"):
         rows.append([key, sa["solver"].get(key), sb["solver"].get(key)])

@@ -18,7 +18,7 @@ from pipelines.logs.review import format_summary, summarize
 from pipelines.loop.gym_loop import ObserveEpisodes
 
 
-def _record(out, policy, *, end_on_collision=False, step_limit=None):
+def _record(out, policy, *, end_on_collision=False, step_limit=None, controller="test_policy"):
     """One episode of seed 1 with 3 robots among 5 humans who do not see them, recorded; its file."""
     base = gym.make(
         "crowdmpc/CrowdNav-v0",
@@ -27,7 +27,7 @@ def _record(out, policy, *, end_on_collision=False, step_limit=None):
         end_on_collision=end_on_collision,
     )
     with McapEpisodeRecorder(out) as recorder:
-        env = ObserveEpisodes(base, [recorder], controller="test_policy")
+        env = ObserveEpisodes(base, [recorder], controller=controller)
         if step_limit is not None:
             env = gym.wrappers.TimeLimit(env, max_episode_steps=step_limit)
         env = VelocityControl(env)
@@ -83,3 +83,17 @@ def test_a_success_is_said_as_such(tmp_path):
     summary = summarize(read_recording(_record(tmp_path / "runs", goal)))
     assert summary["ended_by"] == "success" and summary["metrics"]["timeout"] is False
     assert "ended                                success at 10.4 s" in format_summary(summary)
+
+
+def test_a_folders_table_and_a_comparison_say_what_ended_each_run(tmp_path, capsys):
+    """The table over runs and `review --compare` gave the timeout column alone: "yes" for both."""
+    # two policies: one policy's two episodes of a seed are copies of one episode, which a folder counts once
+    contact = _record(tmp_path / "runs" / "contact", _chase, end_on_collision=True, controller="chase")
+    limit = _record(tmp_path / "runs" / "limit", _stand, controller="stand")
+    assert main(["review", str(tmp_path / "runs")]) == 0
+    rows = {line.split()[0]: line.split() for line in capsys.readouterr().out.splitlines() if ".mcap" in line}
+    assert rows["contact/circle_seed000001.mcap"][5:9] == ["yes", "-", "0.368", "contact"]
+    assert rows["limit/circle_seed000001.mcap"][5:9] == ["yes", "-", "1.41", "time_limit"]
+    assert main(["review", str(contact), "--compare", str(limit)]) == 0
+    *_, row = [line for line in capsys.readouterr().out.splitlines() if line.startswith("ended ")]
+    assert row.split()[1:] == ["contact", "time_limit"]  # the comparison's, after A's summary
