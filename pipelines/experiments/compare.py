@@ -40,7 +40,7 @@ from pipelines.errors import PipelineError
 from pipelines.experiments.compare_sources import recording_records, simulate_records, sweep_records
 from pipelines.experiments.log import EPISODES_FILE
 from pipelines.experiments.summary import t95, wilson_interval
-from pipelines.experiments.tables import mcnemar_exact
+from pipelines.experiments.tables import mcnemar_exact, p_text
 from pipelines.logs.identity import NOT_SETTINGS, UNRECORDED_DEFAULTS, dotted_settings
 from pipelines.logs.reader import UNFINISHED_SUFFIX, find_recordings
 from pipelines.loop.replay_data import REACTIVE_SUFFIX
@@ -275,7 +275,7 @@ class Paired:
         return paired_interval(self.both, self.gained, self.lost, self.neither)
 
     def text(self) -> str:
-        return f"+{self.gained} / −{self.lost} (p = {self.p:.2g})"
+        return f"+{self.gained} / −{self.lost} (p = {p_text(self.p)})"
 
 
 def paired_interval(both: int, gained: int, lost: int, neither: int) -> tuple[float, float]:

@@ -36,6 +36,21 @@ def mcnemar_exact(b: int, c: int) -> float:
     return min(1.0, 2 * tail / (1 << n))
 
 
+# The levels a p-value is read against. At two significant digits McNemar's 0.0498 (+42 / −25) printed as
+# 0.05 and 0.00997 (+74 / −45) as 0.01: significant, read as not.
+SIGNIFICANCE_LEVELS: Final[tuple[float, ...]] = (0.05, 0.01, 0.001)
+
+
+def p_text(p: float) -> str:
+    """``p`` to two significant digits, or as many more as keep it on its own side of each of
+    ``SIGNIFICANCE_LEVELS`` (17 give ``p`` itself)."""
+    for digits in range(2, 17):
+        text = f"{p:.{digits}g}"
+        if all((float(text) < level) == (p < level) for level in SIGNIFICANCE_LEVELS):
+            return text
+    return f"{p:.17g}"
+
+
 def paired_success(reference: CellSummary, other: CellSummary) -> tuple[int, int, float]:
     """On the crowds both cells ran: (other succeeded where the reference failed, the reverse, McNemar p)."""
     shared = reference.successes.keys() & other.successes.keys()
@@ -257,7 +272,7 @@ def _paired_texts(groups: dict[int, list[CellSummary]], columns: list[CellSummar
             paired.append("reference" if len(same) > 1 else "—")
         else:
             gained, lost, p = paired_success(reference, s)
-            paired.append(f"+{gained} / −{lost} (p = {p:.2g})")
+            paired.append(f"+{gained} / −{lost} (p = {p_text(p)})")
     return paired
 
 
