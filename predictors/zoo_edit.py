@@ -17,7 +17,7 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-from predictors.checkpoint import CONFIG_FORMAT, parse_document, read_checkpoint
+from predictors.checkpoint import CONFIG_FORMAT, CheckedPair, parse_document, read_checkpoint
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 from predictors.manifest import (
@@ -52,6 +52,7 @@ def add_entry(
     directory: str | Path | None = None,
     shipped: bool = False,
     replace: bool = False,
+    check_pair: Callable[[CheckedPair], dict] | None = None,
 ) -> tuple[ZooEntry, ZooEntry | None]:
     """``add_to_zoo``: the entry now in the zoo, and the one it had under ``name`` before (None if none).
 
@@ -62,7 +63,10 @@ def add_entry(
     equal, new entry returned).
     ``shipped=True`` is the maintainers' way to add a model of a shipped kind to the shipped zoo itself
     (``directory`` then defaults to ``checkpoints_dir()``). Parallel adds and removes take turns
-    (``zoo_lock``): every one's entry is in the manifest they leave."""
+    (``zoo_lock``): every one's entry is in the manifest they leave.
+    ``check_pair``: called with the pair as it loaded before its entry is made, for a caller's own refusal
+    of the bytes that are kept (`zoo add`'s metrics); what it returns joins ``training`` (figures of those
+    bytes)."""
     check_model_name(name)  # before anything is written: NAME becomes the files' names
     _check_not_built_in(name)
     weights = Path(weights)
@@ -78,6 +82,7 @@ def add_entry(
     entry, weights_bytes, config_bytes = _new_entry(
         weights,
         check_config=partial(_check_shipped_kind, config) if shipped else None,
+        check_pair=check_pair,
         name=name,
         protocol=protocol,
         training_data=training_data,
@@ -101,16 +106,23 @@ def add_entry(
 
 
 def _new_entry(
-    weights: Path, *, check_config: Callable[[dict], None] | None, name: str, **recorded: Any
+    weights: Path,
+    *,
+    check_config: Callable[[dict], None] | None,
+    check_pair: Callable[[CheckedPair], dict] | None,
+    name: str,
+    **recorded: Any,
 ) -> tuple[ZooEntry, bytes, bytes]:
     """The entry of ``weights`` (and its config) under ``name``, the weights' bytes and the config's as the
     zoo keeps them (named ``name``); ``recorded``: ZooEntry's protocol, training_data, metrics and training;
-    ``check_config``: ``read_checkpoint``'s. PredictorError when the pair does not load or the entry does
-    not check."""
+    ``check_config``: ``read_checkpoint``'s, ``check_pair``: ``add_entry``'s. PredictorError when the pair
+    does not load or the entry does not check."""
     config = weights.with_suffix(".json")
     # The bytes kept are the bytes that loaded, each file read once: read again to be hashed and copied, a
     # pair replaced meanwhile (a training run writing it) was added without a check.
     checked = read_checkpoint(weights, config, check_config=check_config)  # refuse a pair that does not load
+    if check_pair is not None:
+        recorded["training"] = {**recorded["training"], **check_pair(checked)}
     document = parse_document(config, checked.config, CONFIG_FORMAT, "crowdmpc predictor config")
     if "model" not in document:
         raise PredictorError(f'{config}: "model" is missing; `crowdmpc train` writes it')

@@ -221,6 +221,7 @@ def _report_leftovers(root: Path, directory: Path | None) -> None:
 
 def _add(args: argparse.Namespace) -> int:
     from predictors import checkpoint, zoo, zoo_edit
+    from predictors.errors import PredictorError
 
     if args.shipped and args.dir is not None:
         raise PipelineError("--shipped adds to the shipped zoo; it does not go with --dir")
@@ -258,30 +259,40 @@ def _add(args: argparse.Namespace) -> int:
     for key in ("training", "training_data", "metrics"):
         if not isinstance(summary.get(key, {}), dict):
             raise PipelineError(f'{metrics_path}: "{key}" must be a JSON object')
-    from pipelines.commands.zoo_metrics import check_metrics_describe, check_protocol_label
+    from pipelines.commands import zoo_metrics
 
     # the zoo name is the user's or the checkpoint's: a metrics file may be shared by mistake
     name = args.name if args.name is not None else args.weights.stem
-    check_metrics_describe(args.weights, metrics_path, summary)
-    check_protocol_label(args.protocol, summary, metrics_path)
+    zoo_metrics.check_metrics_types(summary, metrics_path)
+    zoo_metrics.check_protocol_label(args.protocol, summary, metrics_path)
     # add_to_zoo checks the name before it writes anything
     training = dict(summary.get("training", {}))
     training_data = dict(summary.get("training_data", {}))
     if args.protocol:
         training_data["protocol"] = args.protocol
-    training["size_kb"] = round(args.weights.stat().st_size / 1024, 1)
     training |= {"code": summary["code"]} if isinstance(summary.get("code"), dict) else {}  # that trained it
-    entry, previous = zoo_edit.add_entry(
-        args.weights,
-        name=name,
-        protocol=args.protocol or summary.get("protocol", "custom"),
-        training_data=training_data,
-        metrics=summary.get("metrics", {}),
-        training=training,
-        directory=None if args.shipped else root,
-        shipped=args.shipped,
-        replace=args.replace,
-    )
+
+    def check_pair(checked) -> dict:
+        # the metrics and the size are of the bytes the zoo keeps: read apart, a pair replaced meanwhile
+        # had its metrics checked against, and its size taken of, other files than were added
+        zoo_metrics.check_metrics_describe(args.weights, metrics_path, summary, checked)
+        return {"size_kb": round(len(checked.weights) / 1024, 1)}
+
+    try:
+        entry, previous = zoo_edit.add_entry(
+            args.weights,
+            name=name,
+            protocol=args.protocol or summary.get("protocol", "custom"),
+            training_data=training_data,
+            metrics=summary.get("metrics", {}),
+            training=training,
+            directory=None if args.shipped else root,
+            shipped=args.shipped,
+            replace=args.replace,
+            check_pair=check_pair,
+        )
+    except PredictorError as exc:
+        raise zoo_metrics.unloadable_weights(args.weights, metrics_path, summary) or exc from None
     print(_added_line(entry, previous, args, root))
     # quoted as simulate, evaluate and export name the model in the same note
     note = quick_check_line(repr(entry.name), entry.training)

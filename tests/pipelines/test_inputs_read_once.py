@@ -62,3 +62,33 @@ def test_zoo_add_shipped_reads_the_config_it_checks_the_kind_of_once(tmp_path, m
     )
     assert entry.model == "social_lstm" and zoo.locate("mine").source == zoo.SHIPPED
     assert opened[(src / "mine.json").resolve()] == 1
+
+
+def test_zoo_add_checks_the_metrics_against_the_bytes_it_adds(tmp_path, monkeypatch):
+    """`zoo add` hashed the weights and the config and parsed the config for its metrics check, then loaded
+    the pair, and took the weights' size_kb from a stat apart: a pair replaced between the reads had its
+    metrics checked against other bytes than the zoo keeps."""
+    import hashlib
+    import json
+    import shutil
+
+    from pipelines.cli import main
+    from predictors import zoo
+
+    src = tmp_path / "src"
+    src.mkdir()
+    for suffix in (".pt", ".json"):
+        shutil.copyfile(zoo.shipped_checkpoints_dir() / f"social_lstm_eth{suffix}", src / f"mine{suffix}")
+    weights, config = src / "mine.pt", src / "mine.json"
+    metrics = src / "mine.metrics.json"
+    recorded = {
+        "weights_sha256": hashlib.sha256(weights.read_bytes()).hexdigest(),
+        "config_sha256": hashlib.sha256(config.read_bytes()).hexdigest(),
+    }
+    metrics.write_text(json.dumps({**recorded, "model": "social_lstm", "metrics": {}}))
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    opened = count_opens(monkeypatch, ".pt", ".json")
+    assert main(["zoo", "add", str(weights)]) == 0
+    assert opened[weights.resolve()] == 1 and opened[config.resolve()] == 1
+    added = zoo.read_manifest(tmp_path / "zoo")["mine"]
+    assert added.training["size_kb"] == round(len(weights.read_bytes()) / 1024, 1)
