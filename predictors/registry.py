@@ -57,9 +57,12 @@ def trained_prediction_length(name: str | None) -> int | None:
     if name is None or name in PREDICTORS:
         return None
     located = zoo.locate(name)
-    if located is None:
-        return None
-    value = located.entry.training.get("pred_len", PRED_LEN)
+    return None if located is None else entry_prediction_length(located.entry)
+
+
+def entry_prediction_length(entry: zoo.ZooEntry) -> int:
+    """``trained_prediction_length`` of the zoo entry ``entry``, for a caller that has located it already."""
+    value = entry.training.get("pred_len", PRED_LEN)
     # a manifest is a file anyone can edit: a value that is no length reads as the one train uses
     return value if isinstance(value, int) and not isinstance(value, bool) and value >= 1 else PRED_LEN
 

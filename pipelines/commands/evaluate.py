@@ -152,12 +152,13 @@ def _evaluate(args: argparse.Namespace) -> int:
     config = EvalConfig(top_k=args.top_k, seed=args.seed)
     from pipelines.commands.simulate_checks import zoo_notes
 
-    # before the load: an edited plugin whose weights no longer fit said why only in simulate
-    for note in zoo_notes(args.predictor):
-        print(note, file=sys.stderr)
     # the entry the name loads (none for a built-in: constant velocity, the oracle), read once so that the
-    # sha256 and protocol recorded are the scored weights', whatever a `zoo add --replace` puts in meanwhile
+    # notes, the sha256 and protocol recorded are the scored weights', whatever a `zoo add --replace` puts in
+    # meanwhile
     located = None if args.predictor in PREDICTORS else locate(args.predictor)
+    # before the load: an edited plugin whose weights no longer fit said why only in simulate
+    for note in zoo_notes(args.predictor, None if located is None else located.entry):
+        print(note, file=sys.stderr)
     predictor = load_predictor(args.predictor) if located is None else load_located(located)
     progress = False if args.no_progress else None  # None: a bar on a terminal only
     if args.test is not None:

@@ -164,10 +164,10 @@ def run(args: argparse.Namespace) -> int:
     check_outside_the_zoos(args.out, "--out", "the export")
     check_writable(args.out, "--out")  # before the export, not when CasADi fails to open it afterwards
     _check_replaces_an_export(args.out)
-    from pipelines.commands.simulate_checks import zoo_notes
+    from pipelines.commands.simulate_checks import zoo_entry, zoo_notes
 
     # before the load: an edited plugin whose weights no longer fit said why only in simulate
-    for note in zoo_notes(args.name):
+    for note in zoo_notes(args.name, zoo_entry(args.name)):
         print(note, file=sys.stderr)
     predictor = load_predictor(args.name)
     if (args.humans + args.robots) * args.horizon >= LONG_EXPORT and args.name not in PREDICTORS:

@@ -271,15 +271,16 @@ def _simulate(resolved: SimulateRun) -> int:
     from pipelines.commands.calibration_notes import calibration_notes
 
     formation, spacing = cfg.env.formation, cfg.env.robot_spacing
+    entry = checks.zoo_entry(spec.predictor_name)  # the manifest read once for the notes
     notes = (
         team_notes.separate_goals_note(spec, scenario.robots, formation, spacing),
         team_notes.flock_note(spec, scenario.robots, formation, spacing),
         team_notes.goal_room_note(spec, scenario.robots, formation, spacing),
         team_notes.radius_note(spec, scenario.robots, cfg.env.radius, formation, spacing),
-        checks.horizon_note(spec),
+        checks.horizon_note(spec, entry),
         checks.size_note(spec, scenario.humans, scenario.robots),
         checks.tolerance_note(spec),
-        *checks.zoo_notes(spec.predictor_name),
+        *checks.zoo_notes(spec.predictor_name, entry),
         *calibration_notes(spec, cfg),
     )
     for note in filter(None, notes):

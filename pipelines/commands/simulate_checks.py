@@ -257,17 +257,17 @@ def _refuse_unsampled(config: RunConfig) -> None:
             )
 
 
-def horizon_note(spec: ControllerSpec) -> str | None:
+def horizon_note(spec: ControllerSpec, entry: ZooEntry | None) -> str | None:
     """A line for an MPC that plans further ahead than its learned predictor was trained to predict, None
     otherwise: the net rolls out past its training length, which nothing else would say (TrajNet++ trains
-    12 steps; Table I's horizon H is 4)."""
+    12 steps; Table I's horizon H is 4). ``entry``: the zoo entry its predictor loads (``zoo_entry``)."""
     from pipelines.loop.mpc_setup import mpc_config
     from predictors.base import DT
-    from predictors.registry import trained_prediction_length
+    from predictors.registry import entry_prediction_length
 
     if spec.controller not in MPC_CONTROLLERS:
         return None
-    trained = trained_prediction_length(spec.predictor_name)
+    trained = None if entry is None else entry_prediction_length(entry)
     horizon = mpc_config(spec).horizon
     if trained is None or horizon <= trained:
         return None
@@ -314,9 +314,11 @@ def tolerance_note(spec: ControllerSpec) -> str | None:
     )
 
 
-def _zoo_entry(predictor: str | None) -> ZooEntry | None:
+def zoo_entry(predictor: str | None) -> ZooEntry | None:
     """The zoo entry ``predictor`` loads; None for a registered predictor (no zoo's: its manifest is not
-    read) or a name no zoo holds."""
+    read) or a name no zoo holds. Located once for a command's notes (``horizon_note``, ``zoo_notes``): each
+    located apart, the manifest was read once a note, and a `zoo add --replace` between the reads had the
+    notes describe two models."""
     from predictors.registry import PREDICTORS
     from predictors.zoo import locate
 
@@ -326,14 +328,14 @@ def _zoo_entry(predictor: str | None) -> ZooEntry | None:
     return None if located is None else located.entry
 
 
-def zoo_notes(predictor: str | None) -> list[str]:
-    """The lines on the zoo model ``predictor`` loads (none for a registered predictor), the entry located
-    once: a plugin net whose module file changed since training (``plugin_entry_note``: its outputs may
-    differ from the figures `zoo list` shows), and a quick check trained with ``train --limit-batches``
-    (``zoo.quick_check_line``: simulate, sweep and evaluate ran it beside trained models without a word)."""
+def zoo_notes(predictor: str | None, entry: ZooEntry | None) -> list[str]:
+    """The lines on the zoo model ``predictor`` loads (none for a registered predictor), of its ``entry``
+    (``zoo_entry``): a plugin net whose module file changed since training (``plugin_entry_note``: its
+    outputs may differ from the figures `zoo list` shows), and a quick check trained with ``train
+    --limit-batches`` (``zoo.quick_check_line``: simulate, sweep and evaluate ran it beside trained models
+    without a word)."""
     from pipelines.commands.zoo_list import quick_check_line
 
-    entry = _zoo_entry(predictor)
     if predictor is None or entry is None:
         return []
     notes = (plugin_entry_note(predictor, entry), quick_check_line(repr(predictor), entry.training))

@@ -16,7 +16,7 @@ from pipelines.commands.calibration_notes import (
     calibration_world_note,
     sensor_margins_note,
 )
-from pipelines.commands.simulate_checks import horizon_note, size_note, tolerance_note, zoo_notes
+from pipelines.commands.simulate_checks import horizon_note, size_note, tolerance_note, zoo_entry, zoo_notes
 from pipelines.commands.team_notes import flock_note, goal_room_note, separate_goals_note
 from pipelines.config.schema import MPC_FROM_WORLD
 from pipelines.errors import PipelineError
@@ -260,6 +260,8 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
     sizes: dict[str, list[int]] = {}  # a method's crowd sizes, which the team note reads
     for cell in cells:
         sizes.setdefault(cell.method, []).append(cell.n_humans)
+    # each predictor's zoo entry located once, for every method that plans with it
+    entries = {name: zoo_entry(name) for name in {cell.spec.predictor_name for cell in cells}}
     for cell in cells:
         # a method's cells differ only in their crowd size, which no note reads: each looked at once (the
         # calibration note reads the calibrations file)
@@ -270,10 +272,10 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
         for note in (
             separate_goals_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
             goal_room_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
-            horizon_note(cell.spec),
+            horizon_note(cell.spec, entries[cell.spec.predictor_name]),
             size_note(cell.spec, max(sizes[cell.method]), cell.n_robots),  # its largest crowd's NLP
             tolerance_note(cell.spec),
-            *zoo_notes(cell.spec.predictor_name),
+            *zoo_notes(cell.spec.predictor_name, entries[cell.spec.predictor_name]),
             flock_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
             calibration_world_note(
                 cell.spec,

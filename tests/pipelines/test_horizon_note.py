@@ -7,7 +7,7 @@ import dataclasses
 import pytest
 
 from pipelines.cli import main
-from pipelines.commands.simulate_checks import horizon_note
+from pipelines.commands import simulate_checks
 from pipelines.loop.controllers import ControllerSpec
 from predictors import registry, zoo
 
@@ -15,6 +15,11 @@ from predictors import registry, zoo
 def _spec(controller: str, predictor: str, horizon: int | None) -> ControllerSpec:
     overrides = () if horizon is None else (("horizon", horizon),)
     return ControllerSpec(controller, predictor, mpc_overrides=overrides)
+
+
+def horizon_note(spec: ControllerSpec) -> str | None:
+    """The note as simulate and sweep make it, of the entry the spec's predictor loads."""
+    return simulate_checks.horizon_note(spec, simulate_checks.zoo_entry(spec.predictor_name))
 
 
 def test_a_shipped_net_was_trained_for_12_steps_and_the_rules_learned_nothing():

@@ -92,3 +92,17 @@ def test_zoo_add_checks_the_metrics_against_the_bytes_it_adds(tmp_path, monkeypa
     assert opened[weights.resolve()] == 1 and opened[config.resolve()] == 1
     added = zoo.read_manifest(tmp_path / "zoo")["mine"]
     assert added.training["size_kb"] == round(len(weights.read_bytes()) / 1024, 1)
+
+
+def test_the_notes_of_a_sweep_read_the_manifest_once(monkeypatch):
+    """horizon_note and zoo_notes each located the predictor's entry, once a method: the coupling
+    experiment's three methods of one predictor read the manifest six times for their notes, and a `zoo add
+    --replace` between the reads had the notes describe two models."""
+    from pipelines.commands.sweep_checks import method_notes
+    from pipelines.experiments.cells import get_experiment
+    from predictors.zoo import checkpoints_dir
+
+    manifest = (checkpoints_dir() / "manifest.json").resolve()
+    opened = count_opens(monkeypatch, ".json")
+    method_notes(get_experiment("coupling").cells((5,), 3))
+    assert opened[manifest] == 1

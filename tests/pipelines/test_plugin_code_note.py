@@ -8,6 +8,11 @@ from types import SimpleNamespace
 from pipelines.commands import simulate_checks
 
 
+def zoo_notes(predictor: str | None) -> list[str]:
+    """The notes as simulate, sweep, evaluate and export make them, of the entry the name loads."""
+    return simulate_checks.zoo_notes(predictor, simulate_checks.zoo_entry(predictor))
+
+
 def _model(monkeypatch, trained: str, now: str | None) -> None:
     entry = SimpleNamespace(model="mine:Net", training={"code": {"plugins": {"mine:Net": trained}}})
     monkeypatch.setattr("predictors.zoo.locate", lambda name: SimpleNamespace(entry=entry))
@@ -16,7 +21,7 @@ def _model(monkeypatch, trained: str, now: str | None) -> None:
 
 def test_a_changed_plugin_file_is_noted(monkeypatch):
     _model(monkeypatch, "a" * 64, "b" * 64)
-    assert simulate_checks.zoo_notes("my_net_eth") == [
+    assert zoo_notes("my_net_eth") == [
         "note: 'my_net_eth' was trained with plugin mine:Net of sha256 aaaaaaaaaaaa, its file is now "
         "bbbbbbbbbbbb: if the net's code changed, so may its predictions (zoo list's figures are the "
         "trained code's)"
@@ -25,23 +30,23 @@ def test_a_changed_plugin_file_is_noted(monkeypatch):
 
 def test_the_same_file_or_no_record_says_nothing(monkeypatch):
     _model(monkeypatch, "a" * 64, "a" * 64)
-    assert simulate_checks.zoo_notes("my_net_eth") == []
+    assert zoo_notes("my_net_eth") == []
     _model(monkeypatch, "a" * 64, None)  # not registered here: loading it is refused elsewhere
-    assert simulate_checks.zoo_notes("my_net_eth") == []
-    assert simulate_checks.zoo_notes(None) == []
+    assert zoo_notes("my_net_eth") == []
+    assert zoo_notes(None) == []
 
 
 def test_a_quick_check_is_noted_where_it_runs(monkeypatch):
     """`zoo add` and `zoo list` said so; simulate, sweep, evaluate and export ran it beside trained models."""
     entry = SimpleNamespace(model="mine:Net", training={"limit_batches": 20})
     monkeypatch.setattr("predictors.zoo.locate", lambda name: SimpleNamespace(entry=entry))
-    assert simulate_checks.zoo_notes("my_net_eth") == [
+    assert zoo_notes("my_net_eth") == [
         "note: 'my_net_eth' trained on 20 batches an epoch (train --limit-batches 20): a quick check, not a "
         "trained model (zoo list: *)"
     ]
     entry.training = {}
-    assert simulate_checks.zoo_notes("my_net_eth") == []
-    assert simulate_checks.zoo_notes("constant_velocity") == []  # registered: no zoo entry read
+    assert zoo_notes("my_net_eth") == []
+    assert zoo_notes("constant_velocity") == []  # registered: no zoo entry read
 
 
 def test_export_says_a_changed_plugin_before_a_load_that_fails(monkeypatch, tmp_path, capsys):
@@ -51,7 +56,7 @@ def test_export_says_a_changed_plugin_before_a_load_that_fails(monkeypatch, tmp_
     from pipelines.cli import main
     from pipelines.errors import PipelineError
 
-    monkeypatch.setattr(simulate_checks, "zoo_notes", lambda name: ["note: its file is now bbbb"])
+    monkeypatch.setattr(simulate_checks, "zoo_notes", lambda name, entry: ["note: its file is now bbbb"])
 
     def refuse(name):
         raise PipelineError("weights do not fit the net")
