@@ -6,12 +6,16 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from mpc.config import MAX_HORIZON  # the MPC's: the CasADi function unrolls H recursive steps
 from pipelines.commands import check_outside_the_zoos, check_writable, replace_file
 from pipelines.commands.output_paths import file_output_arg
 from pipelines.errors import PipelineError
+
+if TYPE_CHECKING:
+    from predictors.manifest import ZooEntry
 
 EPILOG = """examples:
   crowdmpc export social_lstm_soft_eth --out runs/social_lstm_soft_eth.casadi --humans 7 --robots 3 \\
@@ -68,17 +72,17 @@ def _parity(predictor, args: argparse.Namespace):
     return require_parity(predictor, args.humans, args.robots, args.horizon)
 
 
-def _notes(predictor, args: argparse.Namespace) -> list[str]:
+def _notes(predictor, args: argparse.Namespace, entry: ZooEntry | None) -> list[str]:
     """What the saved function is that its printout would not say: a horizon past what the net was trained
     to predict (its later steps extrapolate, as ``simulate`` notes for the MPC), a generator's zero noise
     (the function is one deterministic future of many); a plugin net whose module changed since training is
-    said before the load (``run``)."""
+    said before the load (``run``). ``entry``: the zoo entry ``predictor`` was loaded from (None: none)."""
     from predictors.base import DT
-    from predictors.registry import trained_prediction_length
+    from predictors.registry import entry_prediction_length
     from predictors.social_lstm_predictors import SocialGANPredictor
 
     notes = []
-    trained = trained_prediction_length(args.name)
+    trained = None if entry is None else entry_prediction_length(entry)
     if trained is not None and args.horizon > trained:
         notes.append(
             f"note: --horizon {args.horizon} is past the {trained} steps ({trained * DT:g} s) {args.name!r} "
@@ -140,6 +144,7 @@ LONG_EXPORT = 300
 
 def run(args: argparse.Namespace) -> int:
     from predictors.registry import PREDICTORS, load_predictor
+    from predictors.zoo import load_located, locate
 
     # Checked before anything is loaded or built; the agent counts are the simulator's (crowdsim.scenarios).
     if not (
@@ -164,12 +169,16 @@ def run(args: argparse.Namespace) -> int:
     check_outside_the_zoos(args.out, "--out", "the export")
     check_writable(args.out, "--out")  # before the export, not when CasADi fails to open it afterwards
     _check_replaces_an_export(args.out)
-    from pipelines.commands.simulate_checks import zoo_entry, zoo_notes
+    from pipelines.commands.simulate_checks import zoo_notes
 
+    # the entry the name loads located once, for the notes and the load: each located apart, the manifest
+    # was read three times, and a `zoo add --replace` between had the notes describe other weights
+    located = None if args.name in PREDICTORS else locate(args.name)
+    entry = None if located is None else located.entry
     # before the load: an edited plugin whose weights no longer fit said why only in simulate
-    for note in zoo_notes(args.name, zoo_entry(args.name)):
+    for note in zoo_notes(args.name, entry):
         print(note, file=sys.stderr)
-    predictor = load_predictor(args.name)
+    predictor = load_predictor(args.name) if located is None else load_located(located)
     if (args.humans + args.robots) * args.horizon >= LONG_EXPORT and args.name not in PREDICTORS:
         print(  # one CasADi call builds and checks it: Ctrl-C and kill -TERM wait for it to return
             f"note: a net's twin for {args.humans + args.robots} agents over {args.horizon} steps takes long "
@@ -203,6 +212,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"  input  context        ({size}, 1)  from {args.name}.encode(history, mask, humans)")
     print(f"  input  robots_future  ({args.horizon * args.robots * 2}, 1)  (H, M, 2) row-major")
     print(f"  output humans_future  ({args.horizon * args.humans * 2}, 1)  (H, N_h, 2) row-major")
-    for note in _notes(predictor, args):
+    for note in _notes(predictor, args, entry):
         print(note, file=sys.stderr)
     return 0

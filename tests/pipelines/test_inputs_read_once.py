@@ -106,3 +106,17 @@ def test_the_notes_of_a_sweep_read_the_manifest_once(monkeypatch):
     opened = count_opens(monkeypatch, ".json")
     method_notes(get_experiment("coupling").cells((5,), 3))
     assert opened[manifest] == 1
+
+
+def test_export_reads_the_manifest_once(tmp_path, monkeypatch, capsys):
+    """export located the entry for its plugin and quick-check notes, for its load and for its horizon note:
+    the manifest read three times, and a `zoo add --replace` between the reads had the notes describe other
+    weights than were exported."""
+    from pipelines.cli import main
+    from predictors.zoo import checkpoints_dir
+
+    manifest = (checkpoints_dir() / "manifest.json").resolve()
+    opened = count_opens(monkeypatch, ".json")
+    small = ["--humans", "2", "--robots", "1", "--horizon", "2"]
+    assert main(["export", "social_lstm_eth", "--out", str(tmp_path / "f.casadi"), *small]) == 0
+    assert opened[manifest] == 1
