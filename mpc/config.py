@@ -36,6 +36,8 @@ from crowdsim import world
 from crowdsim.world import PAPER_ROBOTS as PAPER_ROBOTS  # Table I's weights were set for it; named here too
 from crowdsim.world import WorldFacts
 from mpc.errors import MPCConfigError
+from mpc.sizes import MAX_HORIZON as MAX_HORIZON  # its importers' name for it since before mpc.sizes
+from mpc.sizes import check_counts, check_step_time
 
 # Option types as Literals (values stay plain strings in JSON and MCAP metadata); the tuples are their values.
 Solver = Literal["fatrop", "ipopt"]
@@ -113,12 +115,6 @@ MPC_BOUNDS: Final[dict[str, tuple[float, str]]] = {
 # At 1e-40 the NLP stays far from overflow (mpc/step_data.py); so does guidance's penalty disc, which divides
 # by mu w_goal (w_goal = 5e-324 with mu = 1e-3 made it zero). Checked as MPC_BOUNDS are (see there).
 MPC_LEAST: Final = {"mu": (1e-3, " 1/m^2"), "delta": (1e-40, ""), "w_goal": (1e-40, "")}
-# The solvers take max_iter as a C int: 2**31 made IPOPT refuse its options (a RuntimeError when the NLP was
-# built), 2**32 wrapped to 0 and every solve failed at once.
-MAX_SOLVER_ITER: Final[int] = 2**31 - 1
-# steps: one CasADi call builds the NLP, and 100 among 50 humans took minutes; a config file, export and
-# Python all stop here (pipelines.config.keys.MOST, pipelines.commands.export)
-MAX_HORIZON: Final[int] = 100
 
 
 @dataclass(frozen=True)
@@ -300,20 +296,9 @@ class MPCConfig:
         self._check_margins()
 
     def _check_numbers(self) -> None:
-        """The counts, weights, lengths and tolerances: finite, of the right sign (their ``MPC_BOUNDS`` and
-        ``MPC_LEAST`` guard the solver: mpc.nlp.check_solvable)."""
-        for name in ("horizon", "j_max", "solver_max_iter"):
-            value = getattr(self, name)
-            minimum = 0 if name == "solver_max_iter" else 1
-            if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-                raise MPCConfigError(f"{name} must be an integer >= {minimum}, got {value!r}")
-        if self.horizon > MAX_HORIZON:
-            raise MPCConfigError(f"horizon must be at most {MAX_HORIZON} steps, got {self.horizon!r}")
-        if self.solver_max_iter > MAX_SOLVER_ITER:
-            raise MPCConfigError(
-                f"solver_max_iter must be at most {MAX_SOLVER_ITER} (the solvers' int), "
-                f"got {self.solver_max_iter!r}"
-            )
+        """The counts, weights, lengths and tolerances: finite, of the right sign, the sizes of the work
+        within mpc.sizes (``MPC_BOUNDS`` and ``MPC_LEAST`` guard the solver: mpc.nlp.check_solvable)."""
+        check_counts(self)
         positive: tuple[str, ...] = ("dt", "w_goal", "w_coll", "v_max", "a_max", "d_min", "mu", "xi")
         positive += ("epsilon", "delta")
         positive += ("d_flock", "cost_scale", "solver_tol", "time_limit_s", "dmpc_relaxation")
@@ -327,6 +312,7 @@ class MPCConfig:
                 raise MPCConfigError(f"{name} must be > 0, got {value!r}")
             if name in non_negative and value < 0:
                 raise MPCConfigError(f"{name} must be >= 0, got {value!r}")
+        check_step_time(self.time_limit_s)
 
     def _plain_scalars(self) -> None:
         """numpy's scalars stored as Python's, as EnvConfig stores them: values from numpy (a sweep over

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
-from mpc.config import MAX_HORIZON  # the MPC's: the CasADi function unrolls H recursive steps
+from mpc.sizes import MAX_HORIZON  # the MPC's: the CasADi function unrolls H recursive steps
 from pipelines.commands import check_outside_the_zoos, check_writable, replace_file
 from pipelines.commands.output_paths import file_output_arg
 from pipelines.errors import PipelineError

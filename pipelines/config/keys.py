@@ -11,7 +11,7 @@ from typing import Any, Final, Literal
 from crowdsim.env_config import ENV_BOUNDS
 from crowdsim.orca import MAX_NEIGHBORS
 from crowdsim.world import MOST_OBS_LEN
-from mpc.config import MAX_HORIZON
+from mpc.sizes import MAX_HORIZON, MOST_IBR_ITERATIONS, MOST_SOLVER_ITER, MOST_STEP_TIME
 
 Kind = Literal["int", "float", "bool", "str", "ints", "strs"]
 
@@ -56,9 +56,9 @@ def kind_of(value: Any) -> Kind:
 
 
 # Numbers that size the work (NLP size, iterations, history rows, ORCA neighbours, episode length) are
-# bounded before anything runs, so that the refusal names the key. Far above any sensible value. The
-# simulator's are its dataclasses' own bounds, read from crowdsim, which refuse the same values from Python
-# (the episode's steps too: EnvConfig, crowdsim.world.MOST_EPISODE_STEPS). (Numbers whose huge or tiny values
+# bounded before anything runs, so that the refusal names the key. Far above any sensible value. They are the
+# dataclasses' own bounds, read from crowdsim and mpc.sizes, which refuse the same values from Python (the
+# episode's steps too: EnvConfig, crowdsim.world.MOST_EPISODE_STEPS). (Numbers whose huge or tiny values
 # overflow the arithmetic are bounded by their dataclass alone, for every caller: crowdsim.env_config's
 # ENV_BOUNDS, OrcaParams' neighbor_dist and time_horizon; mpc.config's MPC_BOUNDS and MPC_LEAST by the NLP
 # as it is built, mpc.nlp.check_solvable.)
@@ -67,9 +67,9 @@ MOST: Final[Mapping[str, float]] = {
     "env.time_limit": ENV_BOUNDS["time_limit"][0],  # s
     "env.orca.max_neighbors": MAX_NEIGHBORS,
     "mpc.horizon": MAX_HORIZON,
-    "mpc.j_max": 1000,
-    "mpc.solver_max_iter": 100_000,
-    "mpc.time_limit_s": 3600.0,
+    "mpc.j_max": MOST_IBR_ITERATIONS,
+    "mpc.solver_max_iter": MOST_SOLVER_ITER,
+    "mpc.time_limit_s": MOST_STEP_TIME,
 }
 
 

@@ -192,12 +192,33 @@ def test_at_every_bound_together_the_nlp_stays_finite(least):
             assert np.isfinite(out.full()).all()
 
 
-def test_solver_max_iter_fits_the_solvers_int():
-    """The solvers take max_iter as a C int: 2**31 made IPOPT refuse its options when the NLP was built, 2**32
-    wrapped to 0 and every solve failed."""
-    assert MPCConfig(solver_max_iter=2**31 - 1).solver_max_iter == 2**31 - 1
-    for value in (2**31, 2**32):
-        with pytest.raises(
-            MPCConfigError, match=rf"^solver_max_iter must be at most 2147483647 .*, got {value}$"
-        ):
-            MPCConfig(solver_max_iter=value)
+@pytest.mark.parametrize(
+    "field, most, beyond, message",
+    [
+        ("horizon", 100, 101, "horizon must be an integer in [1, 100], got 101"),
+        ("j_max", 1000, 10**9, "j_max must be an integer in [1, 1000], got 1000000000"),
+        # the solvers take max_iter as a C int: 2**31 made IPOPT refuse its options, 2**32 wrapped to 0
+        (
+            "solver_max_iter",
+            100_000,
+            2**31,
+            f"solver_max_iter must be an integer in [0, 100000], got {2**31}",
+        ),
+        (
+            "solver_max_iter",
+            100_000,
+            2**32,
+            f"solver_max_iter must be an integer in [0, 100000], got {2**32}",
+        ),
+        ("time_limit_s", 3600.0, 1e9, "time_limit_s must be in (0, 3600] s, got 1000000000.0"),
+        ("time_limit_s", 3600.0, 3600.5, "time_limit_s must be in (0, 3600] s, got 3600.5"),
+    ],
+)
+def test_the_sizes_of_the_work_are_bounded_from_python_as_the_cli_bounds_them(field, most, beyond, message):
+    """MPCConfig(j_max=10**9) or time_limit_s=1e9 was taken from Python, where the config schema refuses
+    anything past 1000 iterations or an hour a step: the library holds those bounds now (mpc.sizes), and the
+    CLI reads them from there."""
+    assert getattr(MPCConfig(**{field: most}), field) == most
+    with pytest.raises(MPCConfigError) as exc:
+        MPCConfig(**{field: beyond})
+    assert str(exc.value) == message

@@ -334,6 +334,26 @@ def test_a_sweep_run_beyond_a_bound_added_since_reads_back_and_does_not_rerun(
         assert err.endswith(f" error: --set mpc.{key}: must be {limit}, got {typed}\n")
 
 
+def test_a_sweep_run_at_the_largest_sizes_of_the_work_reads_back(tmp_path, capsys):
+    """MPCConfig refuses past mpc.sizes' bounds, which the config schema has held since sweeps recorded
+    their configs: a folder that ran at each bound still reports and shows what it ran."""
+    out = tmp_path / "sweep"
+    largest = ["mpc.j_max=1000", "mpc.solver_max_iter=100000", "mpc.time_limit_s=3600.0"]
+    options = ["--experiment", "controllers", "--controllers", "dmpc", "--humans", "1", "--robots", "1"]
+    options += ["--episodes-per-cell", "1", "--set", "env.time_limit=2", "--backend", "inline"]
+    options += ["--no-progress", *(item for setting in largest for item in ("--set", setting))]
+    assert main(["sweep", *options, "--out", str(out)]) == 0
+    (out / "table.md").unlink()
+    capsys.readouterr()
+    assert main(["sweep", "--report-only", "--out", str(out)]) == 0
+    assert "dmpc" in (out / "table.md").read_text()
+    capsys.readouterr()
+    assert main(["config", "show", "--from-sweep", str(out)]) == 0
+    printed = capsys.readouterr().out
+    for line in ("j_max = 1000 ", "solver_max_iter = 100000 ", "time_limit_s = 3600.0 "):
+        assert f"\n{line}" in printed
+
+
 def test_an_unknown_predictor_is_refused_as_simulate_refuses_it_but_a_recorded_one_is_shown(tmp_path, capsys):
     """`config show --set controller.predictor=nosuch` printed the config without a word, where simulate and
     sweep refuse the name. What a sweep recorded is shown as it ran: a predictor that a plugin registered

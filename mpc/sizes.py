@@ -1,0 +1,45 @@
+"""The sizes of the MPC's work: how far each number of ``MPCConfig`` that sets how much a control step builds,
+iterates and waits may go. ``MPCConfig`` refuses beyond them, and the CLI's config schema reads them from here
+(``pipelines.config.keys.MOST``), so that Python and a config file refuse the same values. Far above any
+sensible value: a typo of a few zeros would otherwise run for hours before anything said so.
+
+Unlike ``mpc.config.MPC_BOUNDS``, which the NLP checks as it is built so that a sweep folder that ran beyond a
+bound added since reads back, these refuse every ``MPCConfig``: the config schema has refused the same values
+since sweeps recorded their configs, so no recorded folder holds one."""
+
+from __future__ import annotations
+
+from typing import Any, Final
+
+from mpc.errors import MPCConfigError
+
+# steps: one CasADi call builds the NLP, and 100 among 50 humans took minutes; a config file, export and
+# Python all stop here (pipelines.commands.export too)
+MAX_HORIZON: Final[int] = 100
+MOST_IBR_ITERATIONS: Final[int] = 1000  # j_max (Table I: 10): each one solves the joint or M local NLPs
+# solver_max_iter (100 by default). The solvers take it as a C int, which this stays far below: 2**31 made
+# IPOPT refuse its options (a RuntimeError when the NLP was built), 2**32 wrapped to 0 and every solve failed.
+MOST_SOLVER_ITER: Final[int] = 100_000
+MOST_STEP_TIME: Final[float] = 3600.0  # s, time_limit_s (1 s by default): an hour for one control step
+# The counts: field -> (least, most)
+COUNTS: Final[dict[str, tuple[int, int]]] = {
+    "horizon": (1, MAX_HORIZON),
+    "j_max": (1, MOST_IBR_ITERATIONS),
+    "solver_max_iter": (0, MOST_SOLVER_ITER),
+}
+
+
+def check_counts(cfg: Any) -> None:
+    """``cfg``'s ``COUNTS``: plain ints within their ranges."""
+    for name, (least, most) in COUNTS.items():
+        value = getattr(cfg, name)
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:
+            raise MPCConfigError(f"{name} must be an integer >= {least}, got {value!r}")
+        if value > most:
+            raise MPCConfigError(f"{name} must be an integer in [{least}, {most}], got {value!r}")
+
+
+def check_step_time(seconds: float) -> None:
+    """``time_limit_s``, already a finite number > 0, within ``MOST_STEP_TIME``."""
+    if seconds > MOST_STEP_TIME:
+        raise MPCConfigError(f"time_limit_s must be in (0, {MOST_STEP_TIME:g}] s, got {seconds!r}")
