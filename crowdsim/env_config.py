@@ -31,6 +31,7 @@ from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment
 from crowdsim.world import (
     A_MAX,
     DT,
+    MIN_DT,
     MOST_ACCEL,
     MOST_EPISODE_STEPS,
     MOST_SPEED,
@@ -54,7 +55,6 @@ ENV_BOUNDS: Final[dict[str, tuple[float, str]]] = {
     "v_max": (MOST_SPEED, "m/s"),
     "a_max": (MOST_ACCEL, "m/s^2"),
 }
-MIN_DT: Final[float] = 1e-6  # s: below, (time_limit - timeout_margin) / dt may overflow to inf
 MAX_SPAWN_SEPARATION: Final[float] = 100.0  # m: the scenarios are 10 m across
 MAX_ORCA_RADIUS_MARGIN: Final[float] = 10.0  # m: CrowdNav adds 0.01
 

@@ -39,7 +39,7 @@ from typing import Final
 import numpy as np
 
 from crowdsim.errors import SimulationError, real_number, whole_number
-from crowdsim.world import MOST_COORDINATE
+from crowdsim.world import MIN_DT, MOST_COORDINATE
 
 RVO_EPSILON: Final[float] = 1e-5  # RVO2's Definitions.h: tolerance for (almost) parallel lines
 # neighbor_dist is squared (1e300 overflowed the first step): a finite one up to 1000 km, far beyond any
@@ -343,10 +343,11 @@ def orca_velocities(
     positions, velocities: ``(A, 2)`` current state of every agent (each avoids all the others, or those in
     ``seen`` alone: a replayed person sees the robots, crowdsim.reaction);
     pref_velocities: ``(S, 2)`` for the agents in ``agents``; radii, max_speeds: scalars or ``(A,)``.
-    dt is the simulation time step (used only when agents already overlap).
+    dt is the simulation time step (used only when agents already overlap), at least
+    ``crowdsim.world.MIN_DT``.
     Returns ``(velocities (S, 2), used_lp3 (S,) bool)``. SimulationError (a ValueError) for a NaN, an
     infinity or a component beyond ``crowdsim.world.MOST_COORDINATE`` in positions, velocities or
-    pref_velocities, whose squares would overflow.
+    pref_velocities, whose squares would overflow, and for a shorter dt, whose inverse would.
     """
     positions = np.asarray(positions, dtype=float)
     velocities = np.asarray(velocities, dtype=float)
@@ -356,6 +357,8 @@ def orca_velocities(
     max_speeds = np.broadcast_to(np.asarray(max_speeds, dtype=float), (n_agents,))[agents]
     pref = np.asarray(pref_velocities, dtype=float).reshape(len(agents), 2)
     _check_magnitudes(positions, velocities, pref)
+    if not dt >= MIN_DT:  # NaN too
+        raise SimulationError(f"orca_velocities: dt must be at least {MIN_DT:g} s, got {dt!r}")
 
     # The 2-D program's starting point: the preferred velocity, shortened onto the max-speed disc.
     speed = np.linalg.norm(pref, axis=1)

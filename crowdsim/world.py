@@ -29,6 +29,11 @@ MOST_EPISODE_STEPS: Final[int] = 100_000  # EnvConfig.max_steps: time_limit / dt
 # float64's overflow that ORCA's squares of them over a microsecond's time step or horizon stay finite (1e200
 # gave inf and NaN velocities).
 MOST_COORDINATE: Final[float] = 1e9
+# The shortest step (s) EnvConfig and crowdsim.orca take: below, (time_limit - timeout_margin) / dt may
+# overflow to inf, and ORCA's 1 / dt of overlapping agents did (1e-300 overflowed, and two agents who
+# preferred to stand went at 1 m/s). Here, beside MOST_COORDINATE, since crowdsim.env_config imports
+# crowdsim.orca.
+MIN_DT: Final[float] = 1e-6
 
 
 @dataclass(frozen=True)

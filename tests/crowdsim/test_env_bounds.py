@@ -11,13 +11,13 @@ import pytest
 
 from crowdsim.baselines import StraightController
 from crowdsim.env import CrowdEnv
-from crowdsim.env_config import ENV_BOUNDS, MIN_DT, EnvConfig
+from crowdsim.env_config import ENV_BOUNDS, EnvConfig
 from crowdsim.errors import SimulationError
 from crowdsim.gym_env import CrowdNavEnv
 from crowdsim.gym_reward import RewardConfig
 from crowdsim.orca import OrcaParams
 from crowdsim.profiles import PROFILES, make_env_config
-from crowdsim.world import WorldFacts
+from crowdsim.world import MIN_DT, WorldFacts
 
 
 @pytest.mark.parametrize("profile", sorted(PROFILES))

@@ -1,5 +1,6 @@
 """What orca_velocities, a public function, takes: finite states within crowdsim.world.MOST_COORDINATE, the
-largest of which keep its arithmetic finite; beyond, one ValueError naming the array."""
+largest of which keep its arithmetic finite, and a time step of at least crowdsim.world.MIN_DT; beyond, one
+ValueError naming the array or the step."""
 
 import warnings
 
@@ -7,7 +8,7 @@ import numpy as np
 import pytest
 
 from crowdsim.orca import OrcaParams, orca_velocities
-from crowdsim.world import MOST_COORDINATE
+from crowdsim.world import MIN_DT, MOST_COORDINATE
 
 STILL = np.zeros((2, 2))
 APART = np.array([[0.0, 0.0], [1.0, 0.0]])  # two agents 1 m apart, in contact with 0.5 m radii
@@ -48,3 +49,20 @@ def test_the_largest_states_accepted_give_finite_velocities(dt):
         warnings.simplefilter("error")
         new, _ = orca_velocities(positions, velocities, pref, 10.0, 100.0, params, dt)
     assert np.isfinite(new).all() and (np.linalg.norm(new, axis=1) <= 100.0 * (1 + 1e-9)).all()
+
+
+@pytest.mark.parametrize(
+    "dt, shown", [(1e-300, "1e-300"), (0.0, "0.0"), (-0.4, "-0.4"), (float("nan"), "nan")]
+)
+def test_a_step_shorter_than_the_least_is_refused(dt, shown):
+    """1 / dt of two overlapping agents overflowed at 1e-300 (a RuntimeWarning, and two agents who preferred
+    to stand went at 1 m/s); a NaN step gave zero velocities without a word. EnvConfig's least dt is
+    ORCA's too."""
+    positions, velocities = np.array([[0.0, 0.0], [0.1, 0.0]]), np.array([[1.0, 0.0], [0.0, 0.0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError) as exc:
+            orca_velocities(positions, velocities, STILL, 0.3, 1.0, OrcaParams(), dt)
+        assert str(exc.value) == f"orca_velocities: dt must be at least 1e-06 s, got {shown}"
+        new, _ = orca_velocities(positions, velocities, STILL, 0.3, 1.0, OrcaParams(), MIN_DT)
+    assert np.isfinite(new).all()
