@@ -159,7 +159,8 @@ class CrowdEnv:
     def reset_layout(self, layout: Layout) -> Observation:
         """Start an episode from given starts and goals (everyone at rest), e.g. a hand-built test scene.
 
-        SimulationError names the field and row of a wrong shape or a non-finite coordinate. Starts closer
+        SimulationError names the field and row of a wrong shape or a coordinate not finite or beyond
+        ``crowdsim.world.MOST_COORDINATE``. Starts closer
         than ``2 radius`` (agents in contact from the first step) only warn (``LayoutWarning``): tests start
         agents in contact on purpose, and the paper profile's perpendicular sampler keeps overlapping human
         starts, as the authors' fork does (crowdsim.scenarios); ``reset`` runs its layouts without a warning.

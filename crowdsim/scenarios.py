@@ -111,7 +111,7 @@ import numpy as np
 from crowdsim.conventions import CROSSINGS, SPAWN_SEPARATION
 from crowdsim.crossings import PLACERS
 from crowdsim.errors import SimulationError, real_number
-from crowdsim.world import D_FLOCK, D_MIN, RADIUS, V_PREF, finite_positive
+from crowdsim.world import D_FLOCK, D_MIN, MOST_COORDINATE, RADIUS, V_PREF, finite_positive
 
 SCENARIOS: Final[tuple[str, ...]] = ("circle", "perpendicular")
 Formation = Literal["auto", "row", "wedge", "two_rows", "antipodal"]  # module docstring
@@ -150,8 +150,9 @@ class Layout:
 def checked_layout(layout: Layout) -> Layout:
     """``layout``'s arrays as float copies, or SimulationError naming the field and row that are wrong:
     shapes ``(M, 2), (M, 2), (N, 2), (N, 2)`` (an empty list or array is ``(0, 2)``: no robots, no humans),
-    real and finite coordinates, at most ``MAX_ROBOTS`` robots and ``MAX_HUMANS`` humans (``check_sizes``'s
-    limits, which ``CrowdEnv.reset`` and the gym wrapper apply too)."""
+    real coordinates within ``crowdsim.world.MOST_COORDINATE``, at most ``MAX_ROBOTS`` robots and
+    ``MAX_HUMANS`` humans (``check_sizes``'s limits, which ``CrowdEnv.reset`` and the gym wrapper apply
+    too)."""
     if not isinstance(layout, Layout):
         raise SimulationError(f"layout must be a crowdsim.scenarios.Layout, got {type(layout).__name__}")
     arrays = {}
@@ -174,11 +175,13 @@ def checked_layout(layout: Layout) -> Layout:
             points = points.reshape(0, 2)
         if points.ndim != 2 or points.shape[1] != 2:
             raise SimulationError(f"layout.{name} must be a ({rows}, 2) array, got shape {points.shape}")
-        bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
+        # a start beyond MOST_COORDINATE failed at the first step inside ORCA, which names no field of the
+        # layout; a goal beyond it lies past any agent's reach (MOST_SPEED x MOST_TIME = 8.6e6 m)
+        bad = np.flatnonzero(~(np.abs(points) <= MOST_COORDINATE).all(axis=1))
         if len(bad):
             raise SimulationError(
                 f"layout.{name}[{bad[0]}] is {points[bad[0]].tolist()}: every coordinate must be finite "
-                f"({len(bad)} bad row(s))"
+                f"and within ±{MOST_COORDINATE:g} m ({len(bad)} bad row(s))"
             )
         arrays[name] = points
     for starts, goals in (("robot_starts", "robot_goals"), ("human_starts", "human_goals")):

@@ -11,6 +11,7 @@ from crowdsim.crossings import place_humans_paper, place_humans_v1
 from crowdsim.env import CrowdEnv
 from crowdsim.errors import LayoutWarning, SimulationError
 from crowdsim.scenarios import Layout, make_layout, start_overlaps
+from crowdsim.world import MOST_COORDINATE
 
 
 def scene(humans=((3.0, 0.0),), human_goals=None, robots=((0.0, 0.0),), robot_goals=((0.0, 5.0),)) -> Layout:
@@ -43,6 +44,32 @@ def test_a_non_finite_start_or_goal_is_refused_by_field_and_row(layout, message)
         warnings.simplefilter("error")  # before the check, ORCA's NaN came with RuntimeWarnings
         with pytest.raises(SimulationError, match=message + ": every coordinate must be finite"):
             CrowdEnv().reset_layout(layout)
+
+
+@pytest.mark.parametrize(
+    "field, beyond",
+    [("robot_starts", (2e9, 0.0)), ("robot_goals", (0.0, -1.5e9)), ("human_starts", (0.0, 2e9))],
+)
+def test_a_start_or_goal_beyond_the_largest_coordinate_is_refused_by_field_and_row(field, beyond):
+    """A layout past crowdsim.world.MOST_COORDINATE was taken: a start there failed at the first step inside
+    ORCA ("orca_velocities: every positions component must be ..."), naming no field of the layout, and a
+    goal there lies beyond any agent's reach in an episode (8.6e6 m at most)."""
+    layout = scene(humans=((3.0, 0.0), (4.0, 0.0)))
+    rows = np.array(getattr(layout, field))
+    rows[-1] = beyond
+    with pytest.raises(SimulationError) as exc:
+        CrowdEnv().reset_layout(Layout(**{**vars(layout), field: rows}))
+    assert str(exc.value) == (
+        f"layout.{field}[{len(rows) - 1}] is {list(beyond)}: every coordinate must be finite and within "
+        "±1e+09 m (1 bad row(s))"
+    )
+    edge = np.where(np.array(beyond) != 0.0, np.sign(beyond) * MOST_COORDINATE, 0.0)
+    rows[-1] = edge
+    env = CrowdEnv()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env.reset_layout(Layout(**{**vars(layout), field: rows}))
+        env.step(np.zeros((1, 2)))  # at the bound, ORCA takes it
 
 
 def test_wrong_shapes_and_types_are_refused_by_field():
