@@ -205,20 +205,24 @@ def orca_halfplanes(
     return points, directions, valid.sum(axis=1)
 
 
-def _check_magnitudes(positions: np.ndarray, velocities: np.ndarray, pref: np.ndarray) -> None:
+def _check_magnitudes(
+    positions: np.ndarray, velocities: np.ndarray, pref: np.ndarray, radii: np.ndarray, speeds: np.ndarray
+) -> None:
     """SimulationError (a ValueError) for a NaN, an infinity or a component beyond ``MOST_COORDINATE``.
 
-    The sums of squares, three BLAS calls (a few microseconds, no floating-point warnings), settle every
+    The sums of squares, five BLAS calls (a few microseconds, no floating-point warnings), settle every
     state the simulator makes: within ``MOST_COORDINATE**2`` every component is within the bound; NaN, inf
     or a larger sum go on to the exact test by component."""
     most = MOST_COORDINATE
-    if np.vdot(positions, positions) + np.vdot(velocities, velocities) + np.vdot(pref, pref) <= most * most:
-        return
     arrays = {
         "positions": (positions, "m"),
         "velocities": (velocities, "m/s"),
         "pref_velocities": (pref, "m/s"),
+        "radii": (radii, "m"),  # a radius of 1e300 overflowed the combined radius' square
+        "max_speeds": (speeds, "m/s"),
     }
+    if sum(np.vdot(values, values) for values, _ in arrays.values()) <= most * most:
+        return
     for name, (values, unit) in arrays.items():
         beyond = ~(np.abs(values) <= most)
         if beyond.any():
@@ -346,8 +350,9 @@ def orca_velocities(
     dt is the simulation time step (used only when agents already overlap), at least
     ``crowdsim.world.MIN_DT``.
     Returns ``(velocities (S, 2), used_lp3 (S,) bool)``. SimulationError (a ValueError) for a NaN, an
-    infinity or a component beyond ``crowdsim.world.MOST_COORDINATE`` in positions, velocities or
-    pref_velocities, whose squares would overflow, and for a shorter dt, whose inverse would.
+    infinity or a value beyond ``crowdsim.world.MOST_COORDINATE`` in positions, velocities,
+    pref_velocities, radii or max_speeds, whose squares would overflow, and for a shorter dt, whose inverse
+    would.
     """
     positions = np.asarray(positions, dtype=float)
     velocities = np.asarray(velocities, dtype=float)
@@ -356,7 +361,7 @@ def orca_velocities(
     radii = np.broadcast_to(np.asarray(radii, dtype=float), (n_agents,))
     max_speeds = np.broadcast_to(np.asarray(max_speeds, dtype=float), (n_agents,))[agents]
     pref = np.asarray(pref_velocities, dtype=float).reshape(len(agents), 2)
-    _check_magnitudes(positions, velocities, pref)
+    _check_magnitudes(positions, velocities, pref, radii, max_speeds)
     if not dt >= MIN_DT:  # NaN too
         raise SimulationError(f"orca_velocities: dt must be at least {MIN_DT:g} s, got {dt!r}")
 

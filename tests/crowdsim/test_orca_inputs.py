@@ -66,3 +66,26 @@ def test_a_step_shorter_than_the_least_is_refused(dt, shown):
         assert str(exc.value) == f"orca_velocities: dt must be at least 1e-06 s, got {shown}"
         new, _ = orca_velocities(positions, velocities, STILL, 0.3, 1.0, OrcaParams(), MIN_DT)
     assert np.isfinite(new).all()
+
+
+@pytest.mark.parametrize(
+    "radii, speeds, message",
+    [
+        (1e300, 1.0, "radii component must be finite and within ±1e+09 m, got 1e+300"),
+        (np.array([0.3, np.nan]), 1.0, "radii component must be finite and within ±1e+09 m, got nan"),
+        (
+            0.3,
+            np.array([1.0, -np.inf]),
+            "max_speeds component must be finite and within ±1e+09 m/s, got -inf",
+        ),
+    ],
+)
+def test_absurd_radii_and_speeds_are_refused_in_one_line(radii, speeds, message):
+    """A radius of 1e300 overflowed the combined radius' square (a RuntimeWarning); EnvConfig caps it at
+    10 m, the public function took any."""
+    moving = np.array([[1.0, 0.0], [0.0, 0.0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError) as exc:
+            orca_velocities(APART * 0.1, moving, STILL, radii, speeds, OrcaParams(), 0.4)
+    assert str(exc.value) == f"orca_velocities: every {message}"
