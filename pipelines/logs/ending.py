@@ -11,6 +11,8 @@ metric, which stays as recorded.
 from __future__ import annotations
 
 import math
+from collections import Counter
+from collections.abc import Sequence
 from typing import Any, Final
 
 import numpy as np
@@ -74,6 +76,25 @@ def _last_step_contact(rec: Recording) -> bool | None:
     present = ~np.isnan(humans).any(axis=-1)  # a replayed crowd's untracked people are not there
     closest = min_distance_between_steps(robots, np.nan_to_num(humans), present)
     return math.isfinite(closest) and closest < 2.0 * view.radius
+
+
+ENDS: Final[tuple[str, ...]] = (SUCCESS, TIME_LIMIT, CONTACT, CUT_SHORT)
+UNTOLD: Final[str] = "untold"  # ended_by null: the file does not say what ended it
+
+
+def ends_count(summaries: Sequence[dict[str, Any]]) -> dict[str, int]:
+    """How many of the runs each end ended (``ENDS``, then ``UNTOLD``), every end named, 0 included: the
+    timeout rate beside it counts time_limit, contact, cut_short and untold alike, as not success."""
+    ends = Counter(s.get("ended_by") or UNTOLD for s in summaries)
+    return {end: ends[end] for end in (*ENDS, UNTOLD)}
+
+
+def ends_text(counts: dict[str, int]) -> str:
+    """The folder totals' line of what ended the episodes: "ended by: success 0, time limit 1, ..."."""
+    shown = [f"{end.replace('_', ' ')} {n}" for end, n in counts.items() if end != UNTOLD]
+    if counts.get(UNTOLD):
+        shown.append(f"untold {counts[UNTOLD]} (the file does not say)")
+    return "ended by: " + ", ".join(shown) + "; the timeout rate counts every end but success"
 
 
 def metric_rows(summary: dict[str, Any]) -> list[tuple[str, Any]]:

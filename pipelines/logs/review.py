@@ -18,7 +18,7 @@ from typing import Any, Final
 
 import numpy as np
 
-from pipelines.logs.ending import ended_by, metric_rows
+from pipelines.logs.ending import ended_by, ends_count, ends_text, metric_rows
 from pipelines.logs.identity import differing_settings, null_none, recorded_plugins, shown
 from pipelines.logs.reader import Recording
 from pipelines.loop.record import step_time_stats
@@ -226,6 +226,8 @@ def aggregate_table(
         totals.update(rates)
         if unusable:
             totals["unusable_metrics"] = [ended[i]["file"] for i in unusable]
+        if "episodes" in totals:  # the rates' episodes: what ended those that the timeout rate counts
+            totals["ends"] = ends_count([s for i, s in enumerate(ended) if i not in unusable])
     times = np.concatenate([np.zeros(0), *solve_times_s])
     if times.size:
         totals.update({f"solve_time_{k}": v for k, v in step_time_stats(times).items()})
@@ -297,6 +299,7 @@ def _format_totals(t: dict[str, Any]) -> str:
         )
         lines += [
             rates,
+            ends_text(t["ends"]),
             "between steps (straight motion within each step): "
             + ", ".join(_between_steps_rate(t, name, n) for name in ("collision", "contact")),
             _robot_contact(t, n),

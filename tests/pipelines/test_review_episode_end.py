@@ -18,8 +18,8 @@ from pipelines.logs.review import format_summary, summarize
 from pipelines.loop.gym_loop import ObserveEpisodes
 
 
-def _record(out, policy, *, end_on_collision=False, step_limit=None, controller="test_policy"):
-    """One episode of seed 1 with 3 robots among 5 humans who do not see them, recorded; its file."""
+def _record(out, policy, *, end_on_collision=False, step_limit=None, controller="test_policy", seed=1):
+    """One episode of ``seed`` with 3 robots among 5 humans who do not see them, recorded; its file."""
     base = gym.make(
         "crowdmpc/CrowdNav-v0",
         config={"visibility": "invisible"},
@@ -31,7 +31,7 @@ def _record(out, policy, *, end_on_collision=False, step_limit=None, controller=
         if step_limit is not None:
             env = gym.wrappers.TimeLimit(env, max_episode_steps=step_limit)
         env = VelocityControl(env)
-        obs, info = env.reset(seed=1)
+        obs, info = env.reset(seed=seed)
         rows, n = base.unwrapped.max_robots, info["n_robots"]
         done = False
         while not done:
@@ -97,3 +97,18 @@ def test_a_folders_table_and_a_comparison_say_what_ended_each_run(tmp_path, caps
     assert main(["review", str(contact), "--compare", str(limit)]) == 0
     *_, row = [line for line in capsys.readouterr().out.splitlines() if line.startswith("ended ")]
     assert row.split()[1:] == ["contact", "time_limit"]  # the comparison's, after A's summary
+
+
+def test_the_folders_totals_count_what_ended_its_episodes(tmp_path, capsys):
+    """The totals line said "timeout 100.0 % (2/2)" of a contact and a time limit, the metric (not success),
+    with nothing beside it to say that a contact ended one of them."""
+    _record(tmp_path / "runs" / "contact", _chase, end_on_collision=True)
+    _record(tmp_path / "runs" / "limit", _stand, seed=2)  # one set-up of two episodes: the folder's totals
+    assert main(["review", str(tmp_path / "runs"), "--json", str(tmp_path / "r.json")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    (rates,) = [i for i, line in enumerate(lines) if line.startswith("success ")]
+    assert "timeout 100.0 % (2/2)" in lines[rates]  # the metric as Table II counts it, unchanged
+    assert lines[rates + 1].startswith("ended by: success 0, time limit 1, contact 1, cut short 0; ")
+    totals = json.loads((tmp_path / "r.json").read_text())["totals"]
+    assert totals["timeout_count"] == 2 and totals["success_count"] == 0
+    assert totals["ends"] == {"success": 0, "time_limit": 1, "contact": 1, "cut_short": 0, "untold": 0}
