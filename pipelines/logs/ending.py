@@ -31,15 +31,38 @@ CUT_SHORT: Final[str] = "cut_short"  # stopped before the time limit by whoever 
 
 def max_steps(rec: Recording) -> int | None:
     """The steps the recorded environment runs before its time limit; None where its config does not say
-    (a file without the "config" metadata's env, or values the simulator refuses)."""
+    (a file without the "config" metadata's env that no older simulate recorded, or values the simulator
+    refuses)."""
     env = rec.config().get("env")
     if not isinstance(env, dict):
-        return None
+        return _older_simulate_steps(rec)
     try:
         fields = {k: float(env[k]) for k in ("dt", "time_limit", "timeout_margin")}
         return EnvConfig(**fields).max_steps  # type: ignore[arg-type]
     except (KeyError, TypeError, ValueError, SimulationError):
         return None
+
+
+def _older_simulate_steps(rec: Recording) -> int | None:
+    """The time limit of a file that ``crowdmpc simulate`` recorded before the "config" metadata held the
+    env (586091d, crowdmpc-episode/3): its "run" metadata names the profile, whose settings that simulate ran
+    unchanged (make_env_config(profile, visibility), 6762d28 on), or, before the profiles, names none, when
+    it ran EnvConfig() of then, 30 s of 0.4 s steps, the "v1" profile's. A sweep's or a script's older file
+    says neither (its cell or EnvConfig could set the limit): None, not a guess."""
+    from crowdsim.profiles import PROFILES
+
+    run = rec.run_meta()
+    if run.get("command") != "simulate":
+        return None
+    profile = run.get("profile", "v1")
+    if not isinstance(profile, str) or profile not in PROFILES:
+        return None
+    config = PROFILES[profile]
+    try:  # each of them recorded its dt: a file that says another was not run so
+        recorded_dt = float(rec.episode()["dt"])
+    except (KeyError, ValueError):
+        return None
+    return config.max_steps if recorded_dt == config.dt else None
 
 
 def ended_by(rec: Recording, metrics: dict[str, Any] | None) -> str | None:
@@ -50,9 +73,10 @@ def ended_by(rec: Recording, metrics: dict[str, Any] | None) -> str | None:
     if metrics.get("success") is True:
         return SUCCESS
     steps, limit = metrics.get("n_steps"), max_steps(rec)
-    if not isinstance(steps, int) or limit is None:
+    # the environment stops at its limit: a file of more steps did not run the limit told
+    if not isinstance(steps, int) or limit is None or steps > limit:
         return None
-    if steps >= limit:
+    if steps == limit:
         return TIME_LIMIT
     touched = _last_step_contact(rec)
     if touched is None:

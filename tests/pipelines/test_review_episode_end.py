@@ -3,10 +3,13 @@ so an episode that a contact (end_on_collision) or its own loop ended before the
 yes" as if the time limit had ended it."""
 
 import json
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import pytest
+from mcap.reader import make_reader
+from mcap.writer import Writer
 
 import crowdsim  # noqa: F401  (registers the environment)
 from crowdsim.gym_env import POSITION, PRESENT
@@ -18,11 +21,13 @@ from pipelines.logs.review import format_summary, summarize
 from pipelines.loop.gym_loop import ObserveEpisodes
 
 
-def _record(out, policy, *, end_on_collision=False, step_limit=None, controller="test_policy", seed=1):
+def _record(
+    out, policy, *, end_on_collision=False, step_limit=None, controller="test_policy", seed=1, profile=None
+):
     """One episode of ``seed`` with 3 robots among 5 humans who do not see them, recorded; its file."""
     base = gym.make(
         "crowdmpc/CrowdNav-v0",
-        config={"visibility": "invisible"},
+        config={"visibility": "invisible", **({"profile": profile} if profile else {})},
         n_humans=5,
         end_on_collision=end_on_collision,
     )
@@ -112,3 +117,53 @@ def test_the_folders_totals_count_what_ended_its_episodes(tmp_path, capsys):
     totals = json.loads((tmp_path / "r.json").read_text())["totals"]
     assert totals["timeout_count"] == 2 and totals["success_count"] == 0
     assert totals["ends"] == {"success": 0, "time_limit": 1, "contact": 1, "cut_short": 0, "untold": 0}
+
+
+def _older(source: Path, out: Path, run: dict[str, str]) -> Path:
+    """``source`` as simulate recorded it before the "config" metadata held the env (586091d): format 2, a
+    config without env (an MPC's settings alone, none here) and ``run`` as its "run" metadata."""
+    with source.open("rb") as f:
+        reader = make_reader(f)
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        messages = list(reader.iter_messages())
+    metadata["crowdmpc"] = {**metadata["crowdmpc"], "format": "crowdmpc-episode/2"}
+    metadata["config"], metadata["run"] = {}, {k: json.dumps(v) for k, v in run.items()}
+    with out.open("wb") as f:
+        writer = Writer(f)
+        writer.start(profile="", library="crowdmpc")
+        for name, values in metadata.items():
+            writer.add_metadata(name, values)
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in messages:
+            if schema is not None and schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                schema_id = schemas[schema.id] if schema is not None else 0
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schema_id
+                )
+            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time)
+        writer.finish()
+    return out
+
+
+@pytest.mark.parametrize(
+    ("profile", "run", "ended"),
+    [
+        ("paper", {"command": "simulate", "profile": "paper"}, "time_limit"),  # 6762d28 to 586091d
+        ("v1", {"command": "simulate", "profile": "v1"}, "time_limit"),
+        ("v1", {"command": "simulate"}, "time_limit"),  # before the profiles: the first simulator's 30 s
+        ("paper", {"command": "simulate"}, None),  # 98 steps that simulate then could not have run
+        ("paper", {"experiment": "baselines", "cell": "orca"}, None),  # a sweep's cell could set the limit
+    ],
+)
+def test_an_older_simulates_recording_tells_its_time_limit(tmp_path, profile, run, ended):
+    """A file recorded before the config held the env (no env.timeout_margin) had ended_by null although
+    simulate's "run" metadata named the profile it ran unchanged (or, before the profiles, ran the one
+    simulator there was); a file whose run does not tell its limit stays null."""
+    path = _record(tmp_path / "runs", _stand, profile=profile)
+    older = read_recording(_older(path, tmp_path / "older.mcap", run))
+    assert "env" not in older.config() and older.episode()["dt"] == "0.4"
+    summary = summarize(older)
+    assert summary["metrics"]["timeout"] is True and summary["ended_by"] == ended
