@@ -37,6 +37,10 @@ PREDICTOR_CLASS_NAMES: Final[tuple[str, ...]] = (
     "SocialGANPredictor",
 )
 CONFIG_FORMAT: Final[str] = "crowdmpc-predictor"
+# every key save_checkpoint writes: another is a typo whose setting would be silently left at its default
+CONFIG_KEYS: Final[frozenset[str]] = frozenset(
+    {"format", "name", "class", "model", "obs_len", "net", "training"}
+)
 
 # A zoo name becomes a file name (NAME.pt, NAME.json) and a CasADi function name: letters, digits, "_", "."
 # and "-", starting with a letter or digit, so that no name is a path ("../x", "/tmp/x"), hidden, "." or "..".

@@ -17,7 +17,7 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-from predictors.checkpoint import CONFIG_FORMAT, CheckedPair, parse_document, read_checkpoint
+from predictors.checkpoint import CONFIG_FORMAT, CONFIG_KEYS, CheckedPair, parse_document, read_checkpoint
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 from predictors.manifest import (
@@ -126,6 +126,12 @@ def _new_entry(
     document = parse_document(config, checked.config, CONFIG_FORMAT, "crowdmpc predictor config")
     if "model" not in document:
         raise PredictorError(f'{config}: "model" is missing; `crowdmpc train` writes it')
+    # refused on entering the zoo only: a config loaded from elsewhere may predate CONFIG_KEYS
+    unknown = sorted(set(document) - CONFIG_KEYS)
+    if unknown:
+        raise PredictorError(
+            f"{config}: unknown key {unknown[0]!r}; a predictor config holds {sorted(CONFIG_KEYS)}"
+        )
     document["name"] = name
     config_bytes = (json.dumps(document, indent=2) + "\n").encode()
     entry = ZooEntry(  # checked (name, protocol, metrics ...) before anything is written
