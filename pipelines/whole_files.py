@@ -62,13 +62,16 @@ def save_figure(path: Path, save: Callable[[str], object]) -> None:
 
 def fill_and_rename(fd: int, name: str, path: Path, write: Callable[[str], object]) -> None:
     """``write(name)`` fills the temporary ``name`` (open at ``fd``, locked meanwhile, given ``path``'s
-    mode), which then replaces ``path`` in one rename; the temporary is removed and ``fd`` closed whatever
-    happens (``save_figure``'s and ``replace_file``'s)."""
+    mode), which then replaces ``path`` in one durable rename (``replace_durably``: synced before it, the
+    folder after); the temporary is removed and ``fd`` closed whatever happens (``save_figure``'s and
+    ``replace_file``'s)."""
+    from predictors.durable import replace_durably  # not at import: the predictors package loads casadi
+
     try:
         lock_temporary(fd)
         os.chmod(name, new_file_mode(path))
         write(name)
-        os.replace(name, path)
+        replace_durably(name, path)
     finally:
         if os.path.lexists(name):
             os.unlink(name)

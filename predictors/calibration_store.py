@@ -23,12 +23,9 @@ from typing import Final
 from predictors.calibration import SOURCES, Calibration
 from predictors.checkpoint import read_document
 from predictors.conformal import alpha_text, check_alpha
+from predictors.durable import write_text_durably
 from predictors.errors import PredictorError, UnknownPredictor
-from predictors.manifest import (  # the zoo's own files (ZOO_FILES), its lock, how they are written
-    CALIBRATIONS_NAME,
-    replace_durably,
-    zoo_lock,
-)
+from predictors.manifest import CALIBRATIONS_NAME, zoo_lock  # the zoo's own files (ZOO_FILES), its lock
 from predictors.zoo import (
     SHIPPED,
     USER,
@@ -199,7 +196,7 @@ def _write_blocks(path: Path, blocks: list[Calibration]) -> None:
         "version": CALIBRATIONS_VERSION,
         "calibrations": [b.to_json() for b in sorted(blocks, key=_file_order)],
     }
-    replace_durably(path, json.dumps(document, indent=2, allow_nan=False) + "\n")
+    write_text_durably(path, json.dumps(document, indent=2, allow_nan=False) + "\n")
 
 
 def current_sha256(predictor: str, directory: str | Path | None = None) -> str | None:

@@ -7,7 +7,6 @@ the name of, and a lock (``zoo_lock``) that serialises the writers of its manife
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
@@ -15,6 +14,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from predictors.checkpoint import check_name, check_sha256, read_document
+from predictors.durable import write_text_durably
 from predictors.errors import PredictorError, short_repr
 from predictors.locking import locked
 
@@ -213,8 +213,8 @@ def _check_version(document: dict, path: Path) -> None:
 
 
 def write_manifest(entries: dict[str, ZooEntry], directory: str | Path) -> Path:
-    """Write the manifest of the zoo at ``directory`` (atomically and durably: ``replace_durably``). A writer
-    that read the manifest first holds ``zoo_lock`` from that read to this write."""
+    """Write the manifest of the zoo at ``directory`` (atomically and durably: ``write_text_durably``). A
+    writer that read the manifest first holds ``zoo_lock`` from that read to this write."""
     path = Path(directory) / MANIFEST_NAME
     path.parent.mkdir(parents=True, exist_ok=True)
     document = {
@@ -223,37 +223,10 @@ def write_manifest(entries: dict[str, ZooEntry], directory: str | Path) -> Path:
         "models": [entries[name].to_json() for name in sorted(entries)],
     }
     try:
-        replace_durably(path, json.dumps(document, indent=2) + "\n")
+        write_text_durably(path, json.dumps(document, indent=2) + "\n")
     except OSError as exc:
         if exc.filename is not None:  # a name is given already (the temporary's, at its open or rename)
             raise
         # a write's error names no file: the manifest's, for the CLI's line (a full disk: "could not write")
         raise OSError(exc.errno, exc.strerror, str(path)) from None
     return path
-
-
-def replace_durably(path: Path, text: str) -> None:
-    """Make ``text`` the content of ``path`` (a zoo's manifest or calibrations) in one rename of a temporary
-    (``.NAME.PID.tmp``, the pid keeping two writers apart) synced to disk first, the directory synced after.
-    Unsynced, a power loss could leave the rename on disk without the data it names (XFS, ext4 mounted
-    noauto_da_alloc): an empty manifest, every model of the zoo lost, or one naming the files an add put in
-    place but had not yet made durable."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with tmp.open("w", encoding="utf-8") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)  # a full disk (or a Ctrl-C) leaves no half-written temporary behind
-    try:
-        directory = os.open(path.parent, os.O_RDONLY | os.O_DIRECTORY)
-    except OSError:  # the file is replaced: only its rename's durability is left unsure
-        return
-    try:
-        os.fsync(directory)
-    except OSError:  # a file system that cannot sync a directory (EINVAL on some network ones)
-        pass
-    finally:
-        os.close(directory)

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from predictors.checkpoint import CONFIG_FORMAT, CONFIG_KEYS, CheckedPair, parse_document, read_checkpoint
+from predictors.durable import replace_durably
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 from predictors.manifest import (
@@ -259,7 +260,7 @@ def _replace_with_link(source: Path, target: Path) -> None:
             os.link(source, link)
         except OSError:  # no hard links here (FAT, some network file systems): a synced copy
             _copy_synced(source, link)
-        os.replace(link, target)
+        replace_durably(link, target)
     finally:
         link.unlink(missing_ok=True)
 

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Final
 
 from pipelines.commands import comma_items
 from pipelines.errors import PipelineError
+from predictors.durable import replace_durably
 from predictors.errors import PredictorError
 from predictors.locking import pid_alive, unless_held
 
@@ -269,9 +270,7 @@ def _write_journal(path: Path, blocks: list, before: list | None) -> tuple[Path,
             ) from None
         with open(fd, "w", encoding="utf-8", closefd=False) as f:
             f.write(json.dumps(document, allow_nan=False))
-            f.flush()
-            os.fsync(fd)
-        tmp.replace(journal)
+        replace_durably(tmp, journal)
     except BaseException:
         os.close(fd)
         raise

@@ -14,6 +14,7 @@ from pipelines.commands import check_writable, replace_file
 from pipelines.commands.standard_output import shown
 from pipelines.config.settings import check_last_seed
 from pipelines.errors import PipelineError, writes_named
+from predictors.durable import replace_durably
 
 PART_SUFFIX: Final[str] = ".part"  # a file's name until it is complete
 # How much longer than --out's name data synth's longest temporary name is: write_ndjson's own temporary
@@ -77,7 +78,7 @@ def _synthesize_into(args: argparse.Namespace, provenance: Path, synthesize) -> 
             provenance.unlink(missing_ok=True)  # the old data goes without provenance, never beside the new
             args.out.unlink(missing_ok=True)
             _write_provenance(args, summary, provenance, staged)
-            os.replace(staged, args.out)
+            replace_durably(staged, args.out)
         finally:
             staged.unlink(missing_ok=True)
     return summary

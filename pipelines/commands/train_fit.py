@@ -234,6 +234,7 @@ def _save_best(
     from pipelines.commands.train_report import trained_loss
     from predictors.base import OBS_LEN
     from predictors.checkpoint import save_checkpoint
+    from predictors.durable import replace_durably, sync_folder
 
     extra = {
         "training": {
@@ -255,8 +256,9 @@ def _save_best(
             module.net, model=args.model, name=name, out_dir=staging, obs_len=OBS_LEN, extra=extra
         )
         check_saved_predicts(args.model, written[0], out)
-        for path in written:
-            path.replace(out / path.name)
+        for path in written:  # out synced once, after both renames
+            replace_durably(path, out / path.name, sync_target_folder=False)
+        sync_folder(out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return out / written[0].name, extra

@@ -205,15 +205,16 @@ class EpisodeLog:
 
 
 def write_whole(path: Path, data: bytes) -> None:
-    """``data`` into ``path`` in one rename, synced: a stop or a full disk halfway leaves the file as it was,
-    and no ``.part`` (sweep.json, a kept recording)."""
+    """``data`` into ``path`` in one durable rename (``replace_durably``): a stop or a full disk halfway
+    leaves the file as it was, and no ``.part``; a power loss, the file whole (sweep.json, a kept
+    recording)."""
+    from predictors.durable import replace_durably  # not at import: the predictors package loads casadi
+
     tmp = path.with_suffix(path.suffix + PART_SUFFIX)
     try:
         with open(tmp, "wb") as f:
             f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
+        replace_durably(tmp, path)
     finally:  # stopped before the replace: the half-written file is nobody's
         tmp.unlink(missing_ok=True)
 

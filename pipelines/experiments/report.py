@@ -31,6 +31,7 @@ from pipelines.experiments.report_plots import OUTCOMES, PLOT_AXES, plot_filenam
 from pipelines.experiments.summary import CellSummary, Rate, summarize
 from pipelines.experiments.tables import markdown_table
 from pipelines.experiments.tasks import Cell
+from predictors.durable import replace_durably, sync_folder
 
 CELLS_CSV: Final[str] = "cells.csv"
 EPISODES_CSV: Final[str] = "episodes.csv"
@@ -223,10 +224,11 @@ def write_report_of(
     with writes_named(out):
         try:
             written = _write_staged(staging, experiment, summaries, rows, markdown)
-            for name in written:
-                os.replace(staging / name, out / name)
+            for name in written:  # the folder synced once, after the last rename: not once a file
+                replace_durably(staging / name, out / name, sync_target_folder=False)
             for name in sorted(report_plot_names() - set(written)):
                 (out / name).unlink(missing_ok=True)  # an earlier report's, of cells this one does not have
+            sync_folder(out)
         finally:
             shutil.rmtree(staging, ignore_errors=True)
     return Report(markdown, tuple(out / name for name in written))

@@ -331,7 +331,9 @@ class EpisodeWorker:
 
                 run_meta["crowd_sha256"] = recording_sha256(crowd)
             scratch = tempfile.mkdtemp(prefix="crowdmpc-episode-", dir=self.scratch)
-            recorder = McapEpisodeRecorder(scratch, run_meta=run_meta)
+            # unsynced: the driver keeps a copy of its bytes, synced then (log.write_whole), and a power
+            # loss takes the scratch folder with the episode unrecorded in episodes.jsonl, to run again
+            recorder = McapEpisodeRecorder(scratch, run_meta=run_meta, durable=False)
         meta = {
             "experiment": task.experiment,
             "cell": task.cell.key,

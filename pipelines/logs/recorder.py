@@ -130,6 +130,9 @@ class McapRecorder:
         the file is finished and takes that name, while the ``.part`` is still locked (another run may have
         finished a file there since this one started), where a refusal leaves the finished recording its
         ``.part`` name, and ``close`` raises that.
+    :param durable: finish with a durable rename (``replace_durably``: the file synced before it, its folder
+        after), so that a power loss leaves no recording empty or lost; False for a scratch file whose bytes
+        are copied, synced, elsewhere (a sweep's worker), where the syncs would only cost time.
     """
 
     def __init__(
@@ -141,6 +144,7 @@ class McapRecorder:
         metadata: Mapping[str, Mapping[str, str]] | None = None,
         new: bool = False,
         may_replace: Callable[[Path], None] | None = None,
+        durable: bool = True,
     ):
         if chunk_size <= 0:
             raise PipelineError(f"chunk_size must be a positive number of bytes, got {chunk_size}")
@@ -157,6 +161,7 @@ class McapRecorder:
         # file late would still leave a truncated .mcap for any kill after the first chunk.
         self.part_path = self.path.with_name(self.path.name + UNFINISHED_SUFFIX)
         self._may_replace = may_replace
+        self._durable = durable
         for name, data in (metadata or {}).items():  # before the file: a refusal left a .part of a header
             _check_metadata(name, data)
         self._stream: IO[bytes] = _create(self.part_path, new=new, may_replace=may_replace)
@@ -215,7 +220,12 @@ class McapRecorder:
                 self._stream.flush()
                 if refusal is not None:
                     raise refusal  # the recording is whole, under its .part name
-                os.replace(self.part_path, self.path)
+                if self._durable:
+                    from predictors.durable import replace_durably  # not at import: it loads casadi
+
+                    replace_durably(self.part_path, self.path)
+                else:
+                    os.replace(self.part_path, self.path)
             finally:
                 self._stream.close()  # the lock goes with it, after the rename
         except OSError as exc:

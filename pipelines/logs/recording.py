@@ -115,8 +115,10 @@ class McapEpisodeRecorder:
         record_iterations: bool = False,
         run_meta: Mapping[str, Any] | None = None,
         seeds: Iterable[int] = (),
+        durable: bool = True,
     ):
         self.out_dir = Path(out_dir)
+        self.durable = durable  # McapRecorder's: False for a scratch file that is copied, synced, elsewhere
         if self.out_dir.exists() and not self.out_dir.is_dir():
             raise PipelineError(f"--record needs a folder; {self.out_dir} is a file")
         self.record_iterations = record_iterations
@@ -178,7 +180,10 @@ class McapEpisodeRecorder:
                 _check_episode_files(self.out_dir / episode_filename(scenario, other), identity)
             _check_episode_files(path, identity)  # before the episode runs, and again as the recorder takes
             self._recorder = McapRecorder(  # each file (it holds the .part's lock then)
-                path, metadata=metadata, may_replace=lambda p: check_replaceable(p, identity)
+                path,
+                metadata=metadata,
+                may_replace=lambda p: check_replaceable(p, identity),
+                durable=self.durable,
             )
             self._repeats[(scenario, seed)] = repeat + 1
         self.paths.append(self._recorder.path)
@@ -199,7 +204,10 @@ class McapEpisodeRecorder:
         while True:  # ends: every clash moves past a taken number
             try:
                 recorder = McapRecorder(
-                    self.out_dir / episode_filename(scenario, None, number), metadata=metadata, new=True
+                    self.out_dir / episode_filename(scenario, None, number),
+                    metadata=metadata,
+                    new=True,
+                    durable=self.durable,
                 )
             except FileExistsError:
                 number = next_unseeded(self.out_dir, scenario, number)

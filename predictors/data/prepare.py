@@ -39,6 +39,7 @@ from predictors.data.trajnet_scenes import (
     build_scenes,
     write_ndjson,
 )
+from predictors.durable import replace_durably, sync_folder
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 from predictors.locking import pid_alive
@@ -174,10 +175,14 @@ def _install(staging: Path, out_dir: Path, manifest: dict) -> None:
     # O_NOFOLLOW: a link put down since the check is refused (ELOOP), never followed to create its target
     os.close(os.open(marker, os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW, 0o666))  # the umask decides
     (out_dir / MANIFEST).unlink(missing_ok=True)
+    folders = sorted({(out_dir / name).parent for name in manifest["files"]} | {out_dir})
     for name in manifest["files"]:
         _move(staging / name, out_dir / name)
+    for folder in folders:  # the files' names on disk before the manifest that says they are all there
+        sync_folder(folder)
     _move(staging / MANIFEST, out_dir / MANIFEST)
     marker.unlink(missing_ok=True)  # another preparation into the folder may have finished first
+    sync_folder(out_dir)
 
 
 def _check_out_dir(out_dir: Path) -> None:
@@ -200,14 +205,14 @@ def _move(source: Path, target: Path) -> None:
     """``source`` to ``target`` in one rename; across file systems (``out_dir`` a mount point, such as a
     container's volume) copied beside ``target`` first, then renamed there."""
     try:
-        os.replace(source, target)
+        replace_durably(source, target, sync_target_folder=False)
     except OSError as exc:
         if exc.errno != errno.EXDEV:
             raise
         part = target.with_name(f"{target.name}.part")
         part.unlink(missing_ok=True)  # copyfile would write through a link left there
         shutil.copyfile(source, part)
-        os.replace(part, target)
+        replace_durably(part, target, sync_target_folder=False)
 
 
 def _remove_stale_staging(out_dir: Path) -> None:

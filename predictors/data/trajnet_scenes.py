@@ -43,6 +43,7 @@ from trajnetplusplustools.writers import trajnet
 
 from predictors.base import OBS_LEN, PRED_LEN
 from predictors.data.validate import rows_by_pedestrian
+from predictors.durable import replace_durably
 from predictors.progress import progress_bar
 
 # Converter defaults (trajnetplusplusdataset convert.py arguments, scene.py constants).
@@ -329,7 +330,7 @@ def write_ndjson(
             for r in rows:
                 row = TrackRow(int(tracks[r, 0]), int(tracks[r, 1]), float(tracks[r, 2]), float(tracks[r, 3]))
                 out.write(trajnet(row) + "\n")
-        tmp.replace(path)  # readers never see a half-written file
+        replace_durably(tmp, path)  # readers never see a half-written file, nor a power loss an empty one
     finally:
         tmp.unlink(missing_ok=True)  # a write that failed (or was interrupted) half-way leaves nothing
     return rows

@@ -268,7 +268,7 @@ def test_a_run_of_several_alphas_stores_all_its_blocks_or_none(tmp_path, monkeyp
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     (block,) = _blocks()
     blocks = [dataclasses.replace(block, alpha=alpha) for alpha in (0.3, 0.2)]
-    write = calibration_store.replace_durably
+    write = calibration_store.write_text_durably
     writes = []
 
     def full_at_the_second(path, text):
@@ -277,7 +277,7 @@ def test_a_run_of_several_alphas_stores_all_its_blocks_or_none(tmp_path, monkeyp
             raise OSError(28, "No space left on device")
         write(path, text)
 
-    monkeypatch.setattr(calibration_store, "replace_durably", full_at_the_second)
+    monkeypatch.setattr(calibration_store, "write_text_durably", full_at_the_second)
     try:
         with storing(blocks, _args("none")):
             pass

@@ -1,0 +1,152 @@
+"""Outputs that survive a power loss: every writer that renames a temporary over its output syncs the
+temporary before the rename and the output's folder after it (predictors.durable.replace_durably). A rename
+alone is whole after a kill, but a power loss could put it on disk before the data it names (an empty
+table.md, NAME.pt or manifest) or lose it (the output as it was, though the command said it wrote it)."""
+
+from __future__ import annotations
+
+import os
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.predictors.samples import write_tiny_ewap, write_walk_file
+
+
+class DiskJournal:
+    """The fsyncs (by the inode synced) and the renames (by the name renamed onto) of a call, in order."""
+
+    def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
+        self.events: list[tuple[str, object]] = []
+        fsync, replace, rename = os.fsync, os.replace, os.rename
+
+        def synced(fd: int) -> None:
+            info = os.fstat(fd)
+            self.events.append(("sync", (info.st_dev, info.st_ino)))
+            fsync(fd)
+
+        def renamed(real):
+            def move(source, target, *args, **kwargs):
+                real(source, target, *args, **kwargs)
+                self.events.append(("rename", Path(os.fspath(target)).resolve()))
+
+            return move
+
+        monkeypatch.setattr(os, "fsync", synced)
+        monkeypatch.setattr(os, "replace", renamed(replace))
+        monkeypatch.setattr(os, "rename", renamed(rename))
+
+    def check_durable(self, path: Path) -> None:
+        """``path`` was last renamed into place with its data synced before and its folder synced after."""
+        path = path.resolve()
+        renames = [i for i, event in enumerate(self.events) if event == ("rename", path)]
+        assert renames, f"{path.name} was not renamed into place"
+        last = renames[-1]
+        inode = lambda p: (p.stat().st_dev, p.stat().st_ino)  # noqa: E731
+        before = [what for kind, what in self.events[:last] if kind == "sync"]
+        after = [what for kind, what in self.events[last + 1 :] if kind == "sync"]
+        assert inode(path) in before, f"{path.name}'s data was not synced before its rename"
+        assert inode(path.parent) in after, f"{path.name}'s folder was not synced after its rename"
+
+
+@pytest.fixture
+def disk(monkeypatch, tmp_path_factory) -> DiskJournal:
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path_factory.mktemp("cache")))
+    return DiskJournal(monkeypatch)
+
+
+def test_a_json_output_and_a_figure(disk, tmp_path):
+    """simulate's, compare's, review's and calibrate's --json, train's metrics and settings (write_output,
+    replace_file), and every plot (save_figure)."""
+    from pipelines.commands import write_output
+    from pipelines.whole_files import save_figure
+
+    write_output(tmp_path / "out.json", "{}\n", "--json")
+    save_figure(tmp_path / "plot.png", lambda name: Path(name).write_bytes(b"png"))
+    disk.check_durable(tmp_path / "out.json")
+    disk.check_durable(tmp_path / "plot.png")
+
+
+def test_a_sweeps_report(disk, tmp_path):
+    """table.md, cells.csv, episodes.csv and the plots, renamed from the staging folder."""
+    from pipelines.experiments.cells import get_experiment
+    from pipelines.experiments.report import write_report
+    from tests.pipelines.test_small_fixes import EPISODES, _records
+
+    table2 = get_experiment("table2")
+    cells = [c for c in table2.cells() if c.n_humans == 5]
+    report = write_report(tmp_path, table2, cells, _records(table2, {(c.method, 5): EPISODES for c in cells}))
+    assert {"table.md", "cells.csv", "episodes.csv"} <= {p.name for p in report.files}
+    for path in report.files:
+        disk.check_durable(path)
+
+
+def test_sweep_json_a_kept_recording_and_a_recording(disk, tmp_path):
+    from pipelines.experiments.log import write_whole
+    from tests.pipelines.mcap_episode import record_episode
+
+    write_whole(tmp_path / "sweep.json", b"{}\n")
+    disk.check_durable(tmp_path / "sweep.json")
+    recorded = record_episode(tmp_path, steps=2)
+    disk.check_durable(Path(recorded.path))
+
+
+def test_the_zoos_manifest_its_copies_and_calibrates_journal(disk, tmp_path):
+    from pipelines.commands.calibrate_store import _write_journal
+    from predictors.manifest import write_manifest
+    from predictors.zoo_edit import _replace_with_link
+
+    disk.check_durable(write_manifest({}, tmp_path))
+    (tmp_path / "w.pt").write_bytes(b"weights")
+    _replace_with_link(tmp_path / "w.pt", tmp_path / "NAME.pt")
+    disk.check_durable(tmp_path / "NAME.pt")
+    journal, fd = _write_journal(tmp_path / "calibrations.json", [], None)
+    os.close(fd)
+    disk.check_durable(journal)
+
+
+def test_data_prepare_and_data_synth(disk, tmp_path, capsys, monkeypatch):
+    """Each prepared file and its manifest; synth's data (written by write_ndjson, renamed into --out) and
+    its provenance."""
+    from pipelines.cli import main
+    from predictors.data.prepare import prepare_ewap
+    from predictors.data.trajnet_scenes import write_ndjson
+
+    out = tmp_path / "prepared"
+    prepare_ewap(write_tiny_ewap(tmp_path / "data"), out, categorize_scenes=False, log=lambda msg: None)
+    prepared = [path for path in sorted(out.rglob("*")) if path.is_file()]
+    assert len(prepared) > 3
+    for path in prepared:
+        disk.check_durable(path)
+    write_ndjson(tmp_path / "scenes.ndjson", [], np.zeros((0, 4)))
+    disk.check_durable(tmp_path / "scenes.ndjson")
+
+    def synthesize(path, *_args, **_options):
+        write_ndjson(path, [], np.zeros((0, 4)))
+        return {}
+
+    monkeypatch.setitem(
+        sys.modules, "pipelines.experiments.synth", types.SimpleNamespace(synthesize=synthesize)
+    )
+    synth = tmp_path / "synth" / "s.ndjson"
+    argv = ["data", "synth", "--out", str(synth), "--episodes", "1", "--humans", "2", "--seed", "0"]
+    assert main([*argv, "--no-progress"]) == 0
+    capsys.readouterr()
+    disk.check_durable(synth)
+    disk.check_durable(synth.with_name("s.synth.json"))
+
+
+def test_a_trainings_outputs(disk, tmp_path, capsys):
+    """NAME.pt and NAME.json moved into --out, its metrics and settings."""
+    from pipelines.cli import main
+
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    out = tmp_path / "run"
+    args = ["train", "--model", "vanilla_lstm", "--train", str(data), "--val", str(data), "--name", "walker"]
+    assert main([*args, "--epochs", "1", "--out", str(out), "--no-progress"]) == 0
+    capsys.readouterr()
+    for name in ("walker.pt", "walker.json", "walker.metrics.json"):
+        disk.check_durable(out / name)
