@@ -13,23 +13,31 @@ from typing import TYPE_CHECKING, Any, Final
 from pipelines.loop.spec import MPC_CONTROLLERS
 
 if TYPE_CHECKING:
+    from types import EllipsisType
+
     from pipelines.config import RunConfig
     from pipelines.loop.controllers import ControllerSpec
+    from pipelines.loop.margins import Located
     from predictors.calibration import Calibration
 
+    Planned = Calibration | None | EllipsisType  # the block planned with, None: none; ...: not read yet
 
-def calibration_notes(spec: ControllerSpec, config: RunConfig) -> list[str]:
-    """Every note above for a simulate run of ``spec`` under ``config``."""
+
+def calibration_notes(
+    spec: ControllerSpec, config: RunConfig, located: Located | None | EllipsisType = ...
+) -> list[str]:
+    """Every note above for a simulate run of ``spec`` under ``config``, of the block its controller plans
+    with as the run read it (``located``: ``MarginSpec.located``'s; ``...``: each note looks it up)."""
+    block = located if located is ... or located is None else located[1]
     env, sim = config.env, config.simulate
+    view = sim.sensor_range, sim.sensor_tracks
     visibility = "visible" if env.robots_visible else "invisible"
     found = (
-        calibration_world_note(spec, env.profile, visibility, env.crowd, sim.sensor_range, sim.sensor_tracks),
-        sensor_margins_note(spec, sim.sensor_range, sim.sensor_tracks),
-        calibration_controller_note(spec, sim.sensor_range, sim.sensor_tracks),
-        calibration_team_note(
-            spec, [config.scenario.humans], config.scenario.robots, sim.sensor_range, sim.sensor_tracks
-        ),
-        calibration_physics_note(spec, changed_physics(config), sim.sensor_range, sim.sensor_tracks),
+        calibration_world_note(spec, env.profile, visibility, env.crowd, *view, as_read=block),
+        sensor_margins_note(spec, *view, as_read=block),
+        calibration_controller_note(spec, *view, as_read=block),
+        calibration_team_note(spec, [config.scenario.humans], config.scenario.robots, *view, as_read=block),
+        calibration_physics_note(spec, changed_physics(config), *view, as_read=block),
     )
     return [note for note in found if note is not None]
 
@@ -41,6 +49,7 @@ def calibration_world_note(
     crowd: str = "orca",
     sensor_range: float | None = None,
     sensor_tracks: bool = True,
+    as_read: Planned = ...,
 ) -> str | None:
     """A line for closed-loop conformal margins calibrated under other conventions than the run's (the
     profile, the robots' visibility) or among other humans (a replayed ``crowd``: calibrate runs ORCA's),
@@ -53,7 +62,7 @@ def calibration_world_note(
 
     margins, name = spec.margins, spec.predictor_name
     planned = spec.behind(sensor_range, sensor_tracks)
-    block = _planned_block(planned) if margins.source == "closed-loop" else None
+    block = _planned_block(planned, as_read) if margins.source == "closed-loop" else None
     if block is None or name is None:
         return None
     if crowd != "orca":  # whatever the conventions: calibrate's episodes are ORCA's crowds
@@ -89,7 +98,11 @@ CROWD_SETTINGS: Final[tuple[str, ...]] = (
 
 
 def calibration_physics_note(
-    spec: ControllerSpec, changed: list[str], sensor_range: float | None = None, sensor_tracks: bool = True
+    spec: ControllerSpec,
+    changed: list[str],
+    sensor_range: float | None = None,
+    sensor_tracks: bool = True,
+    as_read: Planned = ...,
 ) -> str | None:
     """A line for closed-loop margins planned with in another world than the one `calibrate` runs (Table I's
     [world], the profile's crowd): ``changed`` names the settings that differ ("world.v_pref 0.5",
@@ -98,9 +111,8 @@ def calibration_physics_note(
     from predictors.conformal import alpha_text
 
     margins, name = spec.margins, spec.predictor_name
-    block = (
-        _planned_block(spec.behind(sensor_range, sensor_tracks)) if margins.source == "closed-loop" else None
-    )
+    planned = spec.behind(sensor_range, sensor_tracks)
+    block = _planned_block(planned, as_read) if margins.source == "closed-loop" else None
     if block is None or name is None or not changed:
         return None
     return (
@@ -127,6 +139,7 @@ def calibration_team_note(
     n_robots: int,
     sensor_range: float | None = None,
     sensor_tracks: bool = True,
+    as_read: Planned = ...,
 ) -> str | None:
     """A line for closed-loop margins planned with by another team than calibrate's (its episodes run
     ``PAPER_ROBOTS`` robots) or among crowds of ``humans`` outside the block's sizes, None otherwise: more
@@ -135,7 +148,7 @@ def calibration_team_note(
     from crowdsim.world import PAPER_ROBOTS
     from predictors.conformal import alpha_text
 
-    block = _planned_block(spec.behind(sensor_range, sensor_tracks))
+    block = _planned_block(spec.behind(sensor_range, sensor_tracks), as_read)
     made = block.details.get("humans") if block is not None else None
     if block is None or block.source != "closed-loop" or not isinstance(made, list) or not made:
         return None
@@ -154,11 +167,14 @@ def calibration_team_note(
 
 
 def calibration_controller_note(
-    spec: ControllerSpec, sensor_range: float | None = None, sensor_tracks: bool = True
+    spec: ControllerSpec,
+    sensor_range: float | None = None,
+    sensor_tracks: bool = True,
+    as_read: Planned = ...,
 ) -> str | None:
     """A line for closed-loop margins calibrated with another controller than the run's (``calibrate
     --controller dmpc`` for a CMPC run), None otherwise (``controller_note``)."""
-    block = _planned_block(spec.behind(sensor_range, sensor_tracks))
+    block = _planned_block(spec.behind(sensor_range, sensor_tracks), as_read)
     return None if block is None else controller_note(block, spec.controller)
 
 
@@ -192,7 +208,7 @@ _MEASURED_BEHIND = {
 
 
 def sensor_margins_note(
-    spec: ControllerSpec, sensor_range: float | None, sensor_tracks: bool = True
+    spec: ControllerSpec, sensor_range: float | None, sensor_tracks: bool = True, as_read: Planned = ...
 ) -> str | None:
     """A line for calibrated margins made with another view of the humans than the run's (``sensor_range`` m;
     None: every human seen), None otherwise. A calibration records the sensor its robots were behind
@@ -209,7 +225,7 @@ def sensor_margins_note(
 
     planned = spec.behind(sensor_range, sensor_tracks)
     margins, name = planned.margins, spec.predictor_name
-    block = _planned_block(planned)
+    block = _planned_block(planned, as_read)
     if block is None or name is None:
         return None
     made = block.sensor_range
@@ -277,11 +293,12 @@ def wide_margins_notes(blocks: Sequence[Calibration]) -> list[str]:
     return notes
 
 
-def _planned_block(spec: ControllerSpec) -> Any:
+def _planned_block(spec: ControllerSpec, as_read: Planned = ...) -> Any:
     """The stored calibration block an MPC's calibrated margins plan with (behind ``margins.sensor_range``:
     ``ControllerSpec.behind``), None for other margins or
     controllers, or where there is none (or it is of other weights: refused with its own line where the
-    margins resolve); the notes above read its details."""
+    margins resolve); the notes above read its details. ``as_read``: that block as the run read it (``...``:
+    looked up here)."""
     from pipelines.loop.margins import CALIBRATED_MODES
     from predictors.calibration_store import find_calibration
     from predictors.errors import PredictorError
@@ -290,6 +307,8 @@ def _planned_block(spec: ControllerSpec) -> Any:
     margins, name = spec.margins, spec.predictor_name
     if spec.controller not in MPC_CONTROLLERS or margins.mode not in CALIBRATED_MODES or name is None:
         return None
+    if as_read is not ...:
+        return as_read
     try:
         return find_calibration(
             name,

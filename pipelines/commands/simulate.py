@@ -25,6 +25,7 @@ from pipelines.loop.controllers import COUPLINGS, ControllerSpec, controller_nam
 from pipelines.loop.replay_data import CROWD_HELP
 
 if TYPE_CHECKING:
+    from pipelines.commands.simulate_reads import PredictorRead
     from pipelines.config import Option, RunConfig
     from pipelines.loop.episode import EpisodeResult
 
@@ -166,6 +167,7 @@ class SimulateRun:
     json: Path | None
     plot: Path | None
     record: Path | None
+    read: PredictorRead | None = None  # the predictor as its checks read it (None: none read yet)
 
     @property
     def controller(self) -> str:
@@ -192,12 +194,12 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
         mpc_overrides=config.mpc_overrides(),
         margins=parse_margins(chosen.margins) if chosen.margins else ControllerSpec.margins,
     )
-    check_choices_apply(config, spec)
+    read = check_choices_apply(config, spec)
     check_file_outputs(config)
     paths = {name: getattr(config.simulate, name) for name in ("plot", "record")}
     json_out = None if config.simulate.json is None else json_path(config.simulate.json)
     outputs = {k: None if v is None else without_missing_parents(Path(v)) for k, v in paths.items()}
-    run = SimulateRun(config, spec, json_out, **outputs)
+    run = SimulateRun(config, spec, json_out, **outputs, read=read)
     if run.plot is not None:
         from crowdsim.plotting import check_figure_path
 
@@ -269,9 +271,10 @@ def _simulate(resolved: SimulateRun) -> int:
     from pipelines.commands import simulate_checks as checks
     from pipelines.commands import team_notes
     from pipelines.commands.calibration_notes import calibration_notes
+    from pipelines.commands.simulate_reads import read_once
 
     formation, spacing = cfg.env.formation, cfg.env.robot_spacing
-    entry = checks.zoo_entry(spec.predictor_name)  # the manifest read once for the notes
+    entry, read = read_once(resolved.read, spec, cfg)  # for the notes and the controller
     notes = (
         team_notes.separate_goals_note(spec, scenario.robots, formation, spacing),
         team_notes.flock_note(spec, scenario.robots, formation, spacing),
@@ -281,7 +284,7 @@ def _simulate(resolved: SimulateRun) -> int:
         checks.size_note(spec, scenario.humans, scenario.robots),
         checks.tolerance_note(spec),
         *checks.zoo_notes(spec.predictor_name, entry),
-        *calibration_notes(spec, cfg),
+        *calibration_notes(spec, cfg, read.calibration),
     )
     for note in filter(None, notes):
         print(note, file=sys.stderr)
@@ -320,6 +323,7 @@ def _simulate(resolved: SimulateRun) -> int:
                 into=results,
                 sensor_range=sim.sensor_range,
                 sensor_tracks=sim.sensor_tracks,
+                read=read,
             )
     except KeyboardInterrupt:
         if not results:

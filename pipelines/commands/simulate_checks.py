@@ -26,6 +26,7 @@ from pipelines.errors import PipelineError
 from pipelines.loop.spec import MPC_CONTROLLERS, is_shipped
 
 if TYPE_CHECKING:
+    from pipelines.commands.simulate_reads import PredictorRead
     from pipelines.config import RunConfig
     from pipelines.loop.controllers import ControllerSpec
     from predictors.manifest import ZooEntry
@@ -54,13 +55,14 @@ def _refuse_unread(config: RunConfig, spec: ControllerSpec) -> None:
             raise PipelineError(f"{shown} changes nothing here, where the runs {why}; leave it out")
 
 
-def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
+def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> PredictorRead | None:
     """Refuse what ``spec``'s controller would ignore: a predictor, margins or coupling for one that plans
     with no predictor, and flocking, record_iterations, an [mpc] value or --no-sensor-tracks for ORCA and
     the straight line, which plan with no MPC and read no pasts. Only values the user chose count
     (``RunConfig.chosen``: a config file shared with cmpc may state the defaults); a plugin reads the spec as
     it sees fit, so only its predictor facts are checked. Then ``record_iterations`` without ``record``:
-    nothing would write it."""
+    nothing would write it. Returns the predictor it loaded (``_check_where_chosen``), None if none, for the
+    run to plan with."""
     check_mpc_solvable(config)
     if spec.predictor_name is None:  # ORCA, the straight line, a plugin that predicts nothing
         chosen = config.controller
@@ -103,12 +105,13 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
     _refuse_unseen_visibility(config)
     _refuse_unsampled(config)
     check_recording(config)
-    _check_where_chosen(config, spec)
+    read = _check_where_chosen(config, spec)
     if spec.record_iterations and config.simulate.record is None:
         raise PipelineError(
             f"{config.label('controller', 'record_iterations')}: the iterations are written to the MCAP "
             "recordings; give --record DIR too (or [simulate] record)"
         )
+    return read
 
 
 def check_mpc_solvable(config: RunConfig, folders: Sequence[Path | None] = ()) -> None:
@@ -170,11 +173,12 @@ def _refuse_untracked(config: RunConfig, controller: str) -> None:
         )
 
 
-def _check_where_chosen(config: RunConfig, spec: ControllerSpec) -> None:
+def _check_where_chosen(config: RunConfig, spec: ControllerSpec) -> PredictorRead | None:
     """The run's own checks of its predictor's name, fixed margins' length and d_min, made now for a value a
     file or ``--set`` chose, so that the refusal names where it came from ("run.toml: controller.predictor:
     unknown predictor 'nope'"); those checks, as the controller is built, named the key at most. Margins
-    given by ``--margins`` too: their refusal there named nothing."""
+    given by ``--margins`` too: their refusal there named nothing. Returns the predictor loaded for the
+    world's check, None if none was."""
     from pipelines.loop.mpc_setup import check_contact_distance, mpc_config
 
     def chosen(section: str, key: str) -> bool:
@@ -185,7 +189,7 @@ def _check_where_chosen(config: RunConfig, spec: ControllerSpec) -> None:
     if name is not None:
         check_predictors_known(config, ("controller", "predictor"))
     if spec.controller not in MPC_CONTROLLERS:
-        return
+        return None
     mpc = mpc_config(spec, world=config.world)
     values = spec.margins.values
     if spec.margins.mode == "fixed" and len(values) != mpc.horizon:
@@ -199,18 +203,20 @@ def _check_where_chosen(config: RunConfig, spec: ControllerSpec) -> None:
             check_contact_distance(config.world, mpc)
         except PipelineError as exc:
             raise config.error(section, key, str(exc)) from None
-    if name is not None and (chosen("world", "dt") or chosen("world", "obs_len")):
-        from pipelines.loop.mpc_setup import check_world
-        from predictors.base import DT as PREDICTOR_DT
-        from predictors.registry import load_predictor
+    if name is None or not (chosen("world", "dt") or chosen("world", "obs_len")):
+        return None
+    from pipelines.commands.simulate_reads import PredictorRead, load_checked
+    from pipelines.loop.mpc_setup import check_world
+    from predictors.base import DT as PREDICTOR_DT
 
-        predictor = load_predictor(name)  # its history and sampling time, which the world must give
-        try:
-            check_world(config.world, mpc, predictor)
-        except PipelineError as exc:
-            # check_world's order: the predictor's sampling time, then its history
-            key = "dt" if predictor.obs_len > 1 and abs(config.world.dt - PREDICTOR_DT) > 1e-12 else "obs_len"
-            raise config.error("world", key, str(exc)) from None
+    located, predictor = load_checked(name)  # its history and sampling time, which the world must give
+    try:
+        check_world(config.world, mpc, predictor)
+    except PipelineError as exc:
+        # check_world's order: the predictor's sampling time, then its history
+        key = "dt" if predictor.obs_len > 1 and abs(config.world.dt - PREDICTOR_DT) > 1e-12 else "obs_len"
+        raise config.error("world", key, str(exc)) from None
+    return PredictorRead(located, predictor)
 
 
 def check_file_outputs(config: RunConfig) -> None:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Final, Protocol
 
 from crowdsim.control import ControlOutput
@@ -44,7 +45,11 @@ from pipelines.loop.spec import (
 from predictors.errors import short_repr
 
 if TYPE_CHECKING:
+    from types import EllipsisType
+
     from crowdsim.env import Observation
+    from pipelines.loop.margins import Located
+    from predictors.base import Predictor
 
 # The spec and the controllers' facts live in pipelines.loop.spec (the MPC adapter needs them, and the
 # registry needs the adapter); they are re-exported here, the registry's public face.
@@ -58,6 +63,7 @@ __all__ = [
     "ControllerName",
     "ControllerSpec",
     "ControllerPlugin",
+    "ControllerReads",
     "Coupling",
     "UnknownController",
     "controller_name",
@@ -90,32 +96,49 @@ class Controller(Protocol):
         ...
 
 
-# (spec, env_config, jit) -> controller
-Builder = Callable[[ControllerSpec, "EnvConfig | None", bool], Controller]
+@dataclass(frozen=True)
+class ControllerReads:
+    """What a shipped MPC reads of the zoo as it is built, read already by the command that builds it
+    (simulate, whose notes describe them): read again, a `zoo add --replace` or a calibrate run between the
+    reads had the notes describe other weights or another block than the controller planned with. A
+    plugin reads its own."""
+
+    predictor: Predictor | None = None  # the one spec.predictor names; None: loaded as the MPC is built
+    calibration: Located | None | EllipsisType = ...  # spec.margins.located of its weights; ...: read then
 
 
-def _straight(spec: ControllerSpec, env_config: EnvConfig | None, jit: bool) -> Controller:
+# (spec, env_config, jit, what the command read for it) -> controller
+Builder = Callable[[ControllerSpec, "EnvConfig | None", bool, ControllerReads], Controller]
+
+
+def _straight(
+    spec: ControllerSpec, env_config: EnvConfig | None, jit: bool, _: ControllerReads
+) -> Controller:
     from pipelines.loop.baselines import straight
 
     return straight(env_config)
 
 
-def _orca(spec: ControllerSpec, env_config: EnvConfig | None, jit: bool) -> Controller:
+def _orca(spec: ControllerSpec, env_config: EnvConfig | None, jit: bool, _: ControllerReads) -> Controller:
     from pipelines.loop.baselines import orca
 
     return orca(env_config)
 
 
-def _cmpc(spec: ControllerSpec, env_config: EnvConfig | None, jit: bool) -> Controller:
+def _cmpc(spec: ControllerSpec, env_config: EnvConfig | None, jit: bool, read: ControllerReads) -> Controller:
     from pipelines.loop.mpc import MPCController
 
-    return MPCController(spec, distributed=False, env_config=env_config, jit=jit)
+    return MPCController(
+        spec, False, env_config=env_config, jit=jit, predictor=read.predictor, calibration=read.calibration
+    )
 
 
-def _dmpc(spec: ControllerSpec, env_config: EnvConfig | None, jit: bool) -> Controller:
+def _dmpc(spec: ControllerSpec, env_config: EnvConfig | None, jit: bool, read: ControllerReads) -> Controller:
     from pipelines.loop.mpc import MPCController
 
-    return MPCController(spec, distributed=True, env_config=env_config, jit=jit)
+    return MPCController(
+        spec, True, env_config=env_config, jit=jit, predictor=read.predictor, calibration=read.calibration
+    )
 
 
 CONTROLLERS: Final[Mapping[ControllerName, Builder]] = {
@@ -127,11 +150,16 @@ CONTROLLERS: Final[Mapping[ControllerName, Builder]] = {
 
 
 def make_controller(
-    spec: ControllerSpec, env_config: EnvConfig | None = None, *, jit: bool = False
+    spec: ControllerSpec,
+    env_config: EnvConfig | None = None,
+    *,
+    jit: bool = False,
+    read: ControllerReads | None = None,
 ) -> Controller:
     """The controller of ``spec`` for episodes simulated under ``env_config`` (a predictor that observes the
     simulator, the ORCA oracle, simulates the humans with it; None: the default conventions). ``jit``
-    compiles the NLPs of a controller whose kind ``compiles`` and is ignored by the others."""
+    compiles the NLPs of a controller whose kind ``compiles`` and is ignored by the others. ``read``: what
+    the command read of the zoo for it already (``ControllerReads``; None: the controller reads it)."""
 
     # a name or a dict given in their place failed on an attribute deep inside (no attribute 'controller')
     if not isinstance(spec, ControllerSpec):
@@ -142,9 +170,13 @@ def make_controller(
         raise PipelineError(
             f"make_controller: env_config must be an EnvConfig or None, got {short_repr(env_config)}"
         )
+    if not (read is None or isinstance(read, ControllerReads)):
+        raise PipelineError(
+            f"make_controller: read must be a ControllerReads or None, got {short_repr(read)}"
+        )
     if is_shipped(spec.controller):
         controller_names()  # PipelineError when an installed entry point takes its name
-        return CONTROLLERS[spec.controller](spec, env_config, jit)
+        return CONTROLLERS[spec.controller](spec, env_config, jit, read or ControllerReads())
     return _build_plugin(controller_plugin(spec.controller), spec, env_config, jit)
 
 

@@ -39,6 +39,7 @@ from pipelines.loop.contract import (
 )
 from pipelines.loop.controllers import (
     Controller,
+    ControllerReads,
     ControllerSpec,
     check_built_for,
     check_controller,
@@ -243,8 +244,10 @@ def run_episodes(
     into: list[EpisodeResult] | None = None,
     sensor_range: float | None = None,
     sensor_tracks: bool = True,
+    read: ControllerReads | None = None,
 ) -> list[EpisodeResult]:
-    """``episodes`` episodes with one controller built once from ``spec``; episode ``i`` uses ``seed + i``.
+    """``episodes`` episodes with one controller built once from ``spec``; episode ``i`` uses ``seed + i``;
+    ``read``: what the command read of the zoo for it already (``make_controller``'s).
 
     ``sensor_range``: the controller sees only the humans within that many metres of some robot, as a tracker
     gives them, reporting its track lengths with ``sensor_tracks`` (pipelines.loop.sensing.RangeLimited); an
@@ -264,7 +267,7 @@ def run_episodes(
     if env_config.crowd != "orca" and episodes:  # its first window drawn before the NLPs are built: 12
         # robots' took 2.5 minutes before "no window has 50 pedestrians" (SimulationError)
         CrowdEnv(env_config, replayed_recording(env_config)).reset(seed, scenario, n_humans, n_robots)
-    controller = make_controller(spec.behind(sensor_range, sensor_tracks), env_config)
+    controller = make_controller(spec.behind(sensor_range, sensor_tracks), env_config, read=read)
     controller = behind_sensor(controller, sensor_range, sensor_tracks, n_robots, n_humans, env_config.crowd)
     results: list[EpisodeResult] = [] if into is None else into
     bar = progress_bar(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", show=progress)

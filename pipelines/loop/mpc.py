@@ -17,7 +17,6 @@ step whose solve raised CasADi's error (a failure inside a solver call is a ``Ru
 ``"exception: <type>"`` and the message in ``extra["exception"]``. Only that is guarded: any other exception
 of the solve (a ``TypeError`` is a bug, not a solver failure), an exception from the predictor it calls, or
 from anything else in the step propagates; so does Ctrl-C, which CasADi hands back inside a ``SystemError``.
-
 What the controller is built from and checked against (its ``MPCConfig``, the world the MPC, the predictor
 and the simulator must agree on, the history the predictor reads) is pipelines.loop.mpc_setup.
 """
@@ -68,9 +67,11 @@ STANDING = MOTION_CLASSES.index("standing")
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
+    from types import EllipsisType
 
     from crowdsim.env import Observation
     from crowdsim.env_config import EnvConfig
+    from pipelines.loop.margins import Located
 
 
 class MPCController(SolversHeld):
@@ -84,9 +85,10 @@ class MPCController(SolversHeld):
         env_config: EnvConfig | None = None,
         jit: bool = False,
         predictor: Predictor | None = None,
+        calibration: Located | None | EllipsisType = ...,
     ):
         """``env_config``: the simulator's settings, for a predictor that observes it (the ORCA oracle);
-        ``predictor``: a predictor object in place of the one ``spec.predictor`` names (tests)."""
+        ``predictor``, ``calibration``: spec's predictor and its ``spec.margins.located``, read already."""
         from crowdsim.env_config import EnvConfig
 
         if distributed and spec.coupling == "nlp":  # refused before a predictor is loaded for it
@@ -103,7 +105,7 @@ class MPCController(SolversHeld):
         check_margins_world(spec, world)  # before the calibration is looked up: the cause, not a symptom
         cfg = mpc_config(spec, jit, world)
         self.predictor_sha256 = sha256 = loaded_sha256(self.model)  # of the weights loaded, read with them
-        at = spec.margins.located(self.model.name, cfg.horizon, sha256)  # the calibrations read once
+        at = spec.margins.located(self.model.name, cfg.horizon, sha256) if calibration is ... else calibration
         self.cfg = cfg.replace(human_margins=spec.margins.resolve(self.model.name, cfg.horizon, sha256, at))
         # conformal-motion and -shortfall: a margin per human and step from its motion class, every step
         self.class_margins = spec.margins.resolve_classes(self.model.name, cfg.horizon, sha256, at)
@@ -152,10 +154,8 @@ class MPCController(SolversHeld):
                 function = self.model.to_casadi(n_humans, n_robots, self.cfg.horizon)
                 size = self.model.context_size(n_humans, n_robots)
                 self._solvers[key] = CoupledCMPC(self.cfg, n_robots, n_humans, function, size)
-            elif self.distributed:
-                self._solvers[key] = DMPC(self.cfg, n_robots, n_humans)
             else:
-                self._solvers[key] = CMPC(self.cfg, n_robots, n_humans)
+                self._solvers[key] = (DMPC if self.distributed else CMPC)(self.cfg, n_robots, n_humans)
         return self._solvers[key]
 
     def prepare(self, n_robots: int, n_humans: Iterable[int]) -> dict[tuple[int, int], float]:

@@ -120,3 +120,23 @@ def test_export_reads_the_manifest_once(tmp_path, monkeypatch, capsys):
     small = ["--humans", "2", "--robots", "1", "--horizon", "2"]
     assert main(["export", "social_lstm_eth", "--out", str(tmp_path / "f.casadi"), *small]) == 0
     assert opened[manifest] == 1
+
+
+def test_simulate_reads_the_manifest_weights_and_calibrations_once(tmp_path, monkeypatch):
+    """simulate's world check loaded the predictor, its notes located the entry again and looked the
+    calibration block up once a note, and its controller loaded the predictor and looked the block up once
+    more: the manifest read 8 times, the weights twice and calibrations.json 6 times, and a `zoo add
+    --replace` or a calibrate run between the reads had the notes and the checks describe other files than
+    the episodes planned with."""
+    from pipelines.cli import main
+    from predictors import zoo
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    shipped = zoo.checkpoints_dir().resolve()
+    opened = count_opens(monkeypatch, ".json", ".pt")
+    run = ["--humans", "2", "--robots", "1", "--episodes", "1", "--no-progress", "--margins", "conformal:0.1"]
+    world = ["--set", "world.obs_len=10", "--set", "env.time_limit=2"]  # obs_len: the world's check loads
+    assert main(["simulate", "--controller", "cmpc", "--predictor", "social_lstm_eth", *run, *world]) == 0
+    read = {path.name: n for path, n in opened.items() if path.parent == shipped}
+    name = "social_lstm_eth"
+    assert read == {"manifest.json": 1, f"{name}.json": 1, f"{name}.pt": 1, "calibrations.json": 1}

@@ -1,0 +1,106 @@
+"""What ``crowdmpc simulate`` reads of the zoo, read once for its checks, its notes and its controller: the
+predictor's entry (the manifest), its weights and config, and the calibration block its margins plan with.
+Each read apart, a `zoo add --replace` or a calibrate run between the reads had the notes describe, or a
+check pass, other files than the episodes planned with."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from pipelines.errors import PipelineError
+from pipelines.loop.spec import MPC_CONTROLLERS, is_shipped
+from predictors.errors import PredictorError
+
+if TYPE_CHECKING:
+    from types import EllipsisType
+
+    from crowdsim.world import WorldFacts
+    from pipelines.config import RunConfig
+    from pipelines.loop.controllers import ControllerReads, ControllerSpec
+    from pipelines.loop.margins import Located
+    from predictors.base import Predictor
+    from predictors.manifest import ZooEntry
+    from predictors.zoo import Located as ZooLocated
+
+
+@dataclass(frozen=True)
+class PredictorRead:
+    """A run's predictor as read from the zoo."""
+
+    located: ZooLocated | None  # the entry it loads; None: a registered predictor, or a name no zoo holds
+    model: Predictor | None  # None: not loaded here (the controller loads it, or refuses it, itself)
+
+    @property
+    def entry(self) -> ZooEntry | None:
+        return None if self.located is None else self.located.entry
+
+
+def load_checked(name: str) -> tuple[ZooLocated | None, Predictor]:
+    """``name``'s zoo entry (None: a registered predictor) and the predictor it loads, refused as
+    ``load_predictor`` refuses it."""
+    from predictors.registry import load_predictor
+    from predictors.zoo import load_located, locate
+
+    located = None if _registered(name) else locate(name)
+    return located, load_predictor(name) if located is None else load_located(located)
+
+
+def read_predictor(spec: ControllerSpec) -> PredictorRead:
+    """The predictor ``spec`` plans with, its entry located (a manifest that does not read is refused here)
+    and, for a shipped MPC, loaded; a model that does not load is left to the controller, which refuses it
+    in its own words after simulate's notes, as before."""
+    from predictors.registry import load_predictor
+    from predictors.zoo import load_located, locate
+
+    name = spec.predictor_name
+    if name is None:
+        return PredictorRead(None, None)
+    registered = _registered(name)
+    located = None if registered else locate(name)
+    if not (is_shipped(spec.controller) and spec.controller in MPC_CONTROLLERS):
+        return PredictorRead(located, None)  # a plugin controller loads its own
+    try:
+        model = load_predictor(name) if registered else None if located is None else load_located(located)
+    except (PipelineError, PredictorError):
+        model = None
+    return PredictorRead(located, model)
+
+
+def planned_calibration(
+    spec: ControllerSpec, model: Predictor | None, world: WorldFacts
+) -> Located | None | EllipsisType:
+    """``spec.margins.located`` as the MPC of ``spec`` (behind the run's sensor) built in ``world`` reads it
+    with ``model``: the block its notes describe and it plans with. ``...`` where ``model`` was not loaded
+    here or the lookup refuses: the controller reads it and refuses after its own checks (the world's
+    sampling time first: the cause, not a symptom)."""
+    from pipelines.loop.mpc_setup import mpc_config
+    from predictors.registry import loaded_sha256
+
+    if model is None or not (is_shipped(spec.controller) and spec.controller in MPC_CONTROLLERS):
+        return ...
+    try:
+        horizon = mpc_config(spec, world=world).horizon
+        return spec.margins.located(model.name, horizon, loaded_sha256(model))
+    except (PipelineError, PredictorError):
+        return ...
+
+
+def read_once(
+    read: PredictorRead | None, spec: ControllerSpec, config: RunConfig
+) -> tuple[ZooEntry | None, ControllerReads]:
+    """The zoo entry simulate's notes describe and what its controller plans with, read once: the predictor
+    as ``read`` (the checks') holds it, else read here, and the block its margins plan with."""
+    from pipelines.loop.controllers import ControllerReads
+
+    read = read or read_predictor(spec)
+    behind = spec.behind(config.simulate.sensor_range, config.simulate.sensor_tracks)
+    return read.entry, ControllerReads(
+        read.model, planned_calibration(behind, read.model, config.env.world())
+    )
+
+
+def _registered(name: str) -> bool:
+    from predictors.registry import PREDICTORS
+
+    return name in PREDICTORS
