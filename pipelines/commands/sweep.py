@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from pipelines.commands import check_writable, comma_items, humans_list, path_arg
 from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.simulate_checks import check_mpc_solvable
-from pipelines.commands.sweep_checks import check_first_episodes, check_plan, method_notes
+from pipelines.commands.sweep_checks import check_first_episodes, check_plan, noted_models
 from pipelines.commands.sweep_help import EPILOG
 from pipelines.commands.sweep_jit import check_compile_cache, choose_jit
 from pipelines.commands.sweep_plan import check_iterations_recorded, check_world, configured_experiment
@@ -270,14 +269,14 @@ def run(args: argparse.Namespace) -> int:
     experiment = config.experiment
     tasks = config.tasks()
     cells = experiment.cells(config.humans, config.n_robots)
+    models = None  # the predictors the notes and the plan's checks read, read once for both
     if not args.report_only:
-        for note in method_notes(cells):
-            print(note, file=sys.stderr)
+        models = noted_models(experiment, cfg, cells)
         from pipelines.commands.calibrate_store import take_back_before_planning
 
         take_back_before_planning(cell.spec.margins for cell in cells)  # a killed calibrate's blocks out
     if args.dry_run:
-        check_plan(experiment, cfg)  # a plan whose every episode would fail is not fine
+        check_plan(experiment, cfg, models)  # a plan whose every episode would fail is not fine
         check_first_episodes(tasks)
         from pipelines.commands.sweep_dry_run import print_plan
 
@@ -287,7 +286,7 @@ def run(args: argparse.Namespace) -> int:
     status = 0
     log: LogRead | None = None  # None: the report reads the log
     if not args.report_only:
-        check_plan(experiment, cfg)
+        check_plan(experiment, cfg, models)
         check_first_episodes(tasks)
         if config.jit:
             check_compile_cache(cfg.label("sweep", "jit"), cfg.sweep.jit)

@@ -4,8 +4,9 @@ the MPC's d_min."""
 
 from __future__ import annotations
 
+import sys
 from functools import partial
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Any, Final, NamedTuple
 
 from mpc.config import MPC_BOUNDS, MPC_LEAST
 from pipelines.commands.calibration_notes import (
@@ -32,18 +33,25 @@ if TYPE_CHECKING:
     from pipelines.experiments.cells import Experiment
     from pipelines.experiments.tasks import Cell, EpisodeTask
     from predictors.base import Predictor
+    from predictors.manifest import ZooEntry
 
 
-def check_predictors(
-    experiment: Experiment, chosen_by: Mapping[str, str] | None = None
-) -> dict[str, Predictor]:
+class PlanModels(NamedTuple):
+    """What ``check_predictors`` read of the zoos, for the other checks and the notes."""
+
+    loaded: dict[str, Predictor]  # the zoo models the plan's methods plan with, by name
+    entries: dict[str, ZooEntry]  # the zoo entry each of them loads (a registered predictor has none)
+
+
+def check_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None = None) -> PlanModels:
     """Fail before starting workers, not once per episode in errors.jsonl: every predictor is registered or
     in a zoo, a zoo model's kind is registered (a plugin's, with --plugin, which the workers inherit), and it
     loads as simulate loads it (its files' sha256 as its manifest records them, its net's contract), each
     refusal simulate's one line. ``chosen_by``: a predictor's name -> where the run chose it ("run.toml:
     controller.predictor", "--predictors"), which its refusal names first. Returns the zoo models loaded,
-    by name, for the couplings' and margins' checks (``check_plan``): each read again, a `zoo add
-    --replace` between the reads had one check pass weights the next did not see."""
+    by name, for the couplings' and margins' checks (``check_plan``), with their entries, for the notes
+    (``method_notes``): each read again, a `zoo add --replace` between the reads had one check pass weights
+    the next did not see."""
     from predictors import zoo
     from predictors.errors import PredictorError
     from predictors.models import model_kind
@@ -54,7 +62,7 @@ def check_predictors(
     # need no zoo (a damaged user manifest stopped a sweep of constant velocity and ORCA)
     wanted = {name for _, spec in experiment.methods if (name := spec.predictor_name) is not None}
     if wanted <= set(PREDICTORS):
-        return {}
+        return PlanModels({}, {})
     # both manifests read once: the entry each name loads (shipped first)
     entries: dict[str, zoo.Located] = {}
     for located in zoo.zoo_entries():
@@ -84,10 +92,34 @@ def check_predictors(
             if not where:
                 raise
             raise PipelineError(f"{where}{exc}") from None
-    return loaded
+    return PlanModels(loaded, {name: entries[name].entry for name in loaded})
 
 
-def check_plan(experiment: Experiment, cfg: RunConfig | None = None) -> None:
+def noted_models(experiment: Experiment, cfg: RunConfig | None, cells: Iterable[Cell]) -> PlanModels:
+    """The installed controllers' and ``check_predictors``' checks of the plan, then the ``method_notes`` of
+    its ``cells`` printed, of the entries those checks located: the manifest read once for both, where read
+    apart a `zoo add --replace` between the reads had the notes describe other models than were checked.
+    A refusal comes after the notes, as it did when the whole ``check_plan`` followed them (the notes then
+    locate the entries themselves)."""
+    from pipelines.loop.spec import controller_names
+    from predictors.errors import PredictorError
+
+    cells = list(cells)
+    try:
+        controller_names()
+        models = check_predictors(experiment, {} if cfg is None else _predictors_chosen(cfg))
+    except (PipelineError, PredictorError):
+        for note in method_notes(cells):
+            print(note, file=sys.stderr)
+        raise
+    for note in method_notes(cells, models.entries):
+        print(note, file=sys.stderr)
+    return models
+
+
+def check_plan(
+    experiment: Experiment, cfg: RunConfig | None = None, models: PlanModels | None = None
+) -> None:
     """The checks a plan passes before any worker starts, in the dry run as in the run: the installed
     controllers (an entry point that would shadow a shipped one is refused here, as ``simulate`` refuses it,
     not in every episode's worker), its predictors (``check_predictors``), the couplings their methods build
@@ -95,11 +127,14 @@ def check_plan(experiment: Experiment, cfg: RunConfig | None = None) -> None:
     the agents' contact distance (``check_contact_distances``) and its bounds (``check_solvable_values``).
     With the run's ``cfg``, a refusal of a value the run chose names where it chose it first ("run.toml:
     mpc.d_min: method 'CMPC' of ..."), as simulate's do: they named the method alone, and a file's value
-    looked like one of the experiment's."""
+    looked like one of the experiment's. ``models``: ``check_predictors``' as ``noted_models`` made them
+    (None: made here)."""
     from pipelines.loop.spec import controller_names
 
     controller_names()
-    loaded = check_predictors(experiment, {} if cfg is None else _predictors_chosen(cfg))
+    if models is None:
+        models = check_predictors(experiment, {} if cfg is None else _predictors_chosen(cfg))
+    loaded = models.loaded
     for check, keys in (
         (
             partial(check_couplings, loaded=loaded),
@@ -242,7 +277,7 @@ def check_margins(experiment: Experiment, loaded: Mapping[str, Predictor] | None
             raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
 
 
-def method_notes(cells: Iterable[Cell]) -> list[str]:
+def method_notes(cells: Iterable[Cell], entries: Mapping[str, ZooEntry] | None = None) -> list[str]:
     """simulate's ``separate_goals_note`` lines (robots trading places whom every pair flocking holds
     together: each worker's controller said it, and leaves it out now), ``goal_room_note`` lines (a d_min
     that leaves two robots no room at their goals), ``horizon_note`` lines (a plan longer than the learned
@@ -253,7 +288,9 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
     behind a sensor), ``calibration_controller_note`` lines (with another controller),
     ``calibration_team_note`` lines (another team or crowd size than calibrated) and
     ``calibration_physics_note`` lines (in another crowd's motion, [env] / [env.orca]), each once, naming
-    the methods it applies to: a grid of --vary columns printed the same line for each of eight methods."""
+    the methods it applies to: a grid of --vary columns printed the same line for each of eight methods.
+    ``entries``: the zoo entry each zoo predictor loads, located already (``check_predictors``'; None:
+    located here)."""
     methods: dict[str, list[str]] = {}  # a note's text -> the methods it applies to, in table order
     seen: set[str] = set()
     cells = list(cells)
@@ -261,7 +298,8 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
     for cell in cells:
         sizes.setdefault(cell.method, []).append(cell.n_humans)
     # each predictor's zoo entry located once, for every method that plans with it
-    entries = {name: zoo_entry(name) for name in {cell.spec.predictor_name for cell in cells}}
+    names = {cell.spec.predictor_name for cell in cells}
+    located = {n: zoo_entry(n) if entries is None else entries.get(n or "") for n in names}
     for cell in cells:
         # a method's cells differ only in their crowd size, which no note reads: each looked at once (the
         # calibration note reads the calibrations file)
@@ -272,10 +310,10 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
         for note in (
             separate_goals_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
             goal_room_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
-            horizon_note(cell.spec, entries[cell.spec.predictor_name]),
+            horizon_note(cell.spec, located[cell.spec.predictor_name]),
             size_note(cell.spec, max(sizes[cell.method]), cell.n_robots),  # its largest crowd's NLP
             tolerance_note(cell.spec),
-            *zoo_notes(cell.spec.predictor_name, entries[cell.spec.predictor_name]),
+            *zoo_notes(cell.spec.predictor_name, located[cell.spec.predictor_name]),
             flock_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
             calibration_world_note(
                 cell.spec,

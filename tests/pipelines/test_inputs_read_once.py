@@ -140,3 +140,30 @@ def test_simulate_reads_the_manifest_weights_and_calibrations_once(tmp_path, mon
     read = {path.name: n for path, n in opened.items() if path.parent == shipped}
     name = "social_lstm_eth"
     assert read == {"manifest.json": 1, f"{name}.json": 1, f"{name}.pt": 1, "calibrations.json": 1}
+
+
+def test_a_sweep_reads_the_manifest_once_for_its_notes_and_its_checks(tmp_path, monkeypatch):
+    """A sweep's notes located their predictors' entries (method_notes) and then check_plan read the
+    manifests again for the models it loads: a `zoo add --replace` between the reads had the notes describe
+    other models than were checked and run."""
+    from pipelines.cli import main
+    from predictors import zoo
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    manifest = (zoo.checkpoints_dir() / "manifest.json").resolve()
+    opened = count_opens(monkeypatch, ".json")
+    plan = ["--experiment", "coupling", "--humans", "5", "--episodes", "1", "--set", "mpc.horizon=14"]
+    assert main(["sweep", *plan, "--dry-run", "--out", str(tmp_path / "sweep")]) == 0
+    assert opened[manifest] == 1
+
+
+def test_a_refused_sweep_plan_says_its_notes_first(tmp_path, capsys):
+    """The plan's predictors are checked before the notes, which are printed before any refusal, as when
+    the whole check followed them."""
+    from pipelines.cli import main
+
+    plan = ["--experiment", "table2", "--predictor", "social_lstm_eth", "--humans", "5", "--episodes", "1"]
+    refused = ["--set", "mpc.horizon=14", "--margins", "conformal:0.1"]  # calibrated for 4 steps
+    assert main(["sweep", *plan, *refused, "--dry-run", "--out", str(tmp_path / "sweep")]) == 2
+    err = capsys.readouterr().err
+    assert err.index("trained to predict 12") < err.index("covers 4 steps"), err
