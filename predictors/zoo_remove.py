@@ -10,6 +10,7 @@ import os
 from pathlib import Path
 
 from predictors.checkpoint import check_name
+from predictors.durable import sync_folder
 from predictors.errors import PredictorError
 from predictors.manifest import MANIFEST_NAME, ZooEntry, is_zoo_file, write_manifest, zoo_lock
 from predictors.zoo import checkpoints_dir, read_manifest, writable_zoo_dir
@@ -44,6 +45,9 @@ def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[Zoo
         for path, hidden in zip(doomed, parked, strict=True):
             if path.exists() or path.is_symlink():
                 os.replace(path, hidden)
+        # on disk before the manifest drops the entry: lost after a power loss, the renames would leave
+        # the entry's files under their names, a model that no entry names
+        _sync_folders(doomed)
         try:
             write_manifest(entries, root)
         except OSError:  # a full disk, a quota: the manifest as it was, so the entry's files go back
@@ -85,6 +89,14 @@ def _put_back(doomed: list[Path], parked: list[Path]) -> None:
     for path, hidden in zip(doomed, parked, strict=True):
         if os.path.lexists(hidden):
             os.replace(hidden, path)
+    # the entry is still in the manifest: lost after a power loss, the renames would leave it without files
+    _sync_folders(doomed)
+
+
+def _sync_folders(paths: list[Path]) -> None:
+    """The renames into the folders of ``paths`` on disk, each folder synced once."""
+    for folder in sorted({path.parent for path in paths}):
+        sync_folder(folder)
 
 
 def remove_leftovers(name: str, directory: str | Path | None = None) -> tuple[list[Path], Path]:

@@ -150,3 +150,41 @@ def test_a_trainings_outputs(disk, tmp_path, capsys):
     capsys.readouterr()
     for name in ("walker.pt", "walker.json", "walker.metrics.json"):
         disk.check_durable(out / name)
+
+
+@pytest.mark.parametrize("manifest_written", [True, False], ids=["removed", "put-back"])
+def test_a_zoo_removes_renames(disk, tmp_path, monkeypatch, manifest_written):
+    """zoo remove hides the entry's files before its manifest drops the entry, and puts them back when the
+    manifest cannot be written: each set of renames was unsynced, so a power loss could undo them after
+    the manifest's rename (files no entry names) or after the command's refusal (an entry without files).
+    The zoo's folder is synced after the hiding renames, before the manifest's, and after the put-back."""
+    from predictors import zoo_edit, zoo_remove
+    from tests.predictors.test_zoo_guards import copy_pair
+
+    user = tmp_path / "user"
+    zoo_edit.add_to_zoo(
+        copy_pair(tmp_path / "run"), name="mine", protocol="p", training_data={}, metrics={}, directory=user
+    )
+    folder = (user.stat().st_dev, user.stat().st_ino)
+    disk.events.clear()
+    if not manifest_written:
+
+        def full_disk(*_args, **_kwargs):
+            raise OSError(28, "No space left on device")
+
+        monkeypatch.setattr(zoo_remove, "write_manifest", full_disk)
+        with pytest.raises(OSError):
+            zoo_remove.remove_from_zoo("mine", user)
+        renames = [i for i, (kind, _) in enumerate(disk.events) if kind == "rename"]
+        put_back = {disk.events[i][1] for i in renames[-2:]}
+        assert put_back == {(user / "mine.pt").resolve(), (user / "mine.json").resolve()}
+        assert ("sync", folder) in disk.events[renames[-1] + 1 :], "the put-back was not synced"
+        assert (user / "mine.pt").is_file() and (user / "mine.json").is_file()
+        return
+    zoo_remove.remove_from_zoo("mine", user)
+    renames = [i for i, (kind, _) in enumerate(disk.events) if kind == "rename"]
+    hidden, manifest = renames[-2], renames[-1]
+    assert (
+        str(disk.events[hidden][1]).endswith(".removed") and disk.events[manifest][1].name == "manifest.json"
+    )
+    assert ("sync", folder) in disk.events[hidden + 1 : manifest], "the hiding renames were not synced"
