@@ -174,6 +174,8 @@ class EpisodeLog:
                 f.write(data)
                 f.flush()
                 os.fsync(f.fileno())
+            if not offset:
+                _sync_name(self.path)
         except OSError as exc:  # a full disk, a quota, `ulimit -f`: a torn last line, which a resume cuts
             raise self._not_appended(f"the record of {record.get('key')!r}", exc, "it") from None
         return offset, data
@@ -183,10 +185,13 @@ class EpisodeLog:
         halfway leaves whole lines and at most a torn last one, which a resume cuts."""
         try:
             with open(self.path, "ab") as f:
+                new = not os.fstat(f.fileno()).st_size
                 for record in records:
                     f.write(self._line(record))
                 f.flush()
                 os.fsync(f.fileno())
+            if new:
+                _sync_name(self.path)
         except OSError as exc:
             raise self._not_appended("records", exc, "them") from None
 
@@ -202,6 +207,15 @@ class EpisodeLog:
         except (TypeError, ValueError) as exc:  # the workers check their records (worker.check_json)
             key = record.get("key") if isinstance(record, dict) else None
             raise PipelineError(f"{self.path}: cannot write the record of {key!r} as JSON ({exc})") from None
+
+
+def _sync_name(path: Path) -> None:
+    """The folder of a log whose first line was just synced, synced once: the file's data is on disk, but
+    on a strict POSIX file system its name (the entry the open made) may not be, and a power loss could
+    lose every episode of the sweep with it. Later lines add no entry, so need no folder sync."""
+    from predictors.durable import sync_folder  # not at import: the predictors package loads casadi
+
+    sync_folder(path.parent)
 
 
 def write_whole(path: Path, data: bytes) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 from pathlib import Path
 
 import pytest
@@ -29,19 +30,22 @@ from pipelines.loop.spec import UnknownController
 def test_each_appended_line_is_on_disk_before_append_returns(tmp_path, monkeypatch):
     """A kill right after ``append`` must not lose the line (the resume would skip nothing and the episode
     would silently run again, or worse, the file would end torn in the middle): append fsyncs the file, and
-    does so once the whole line has been written."""
+    does so once the whole line has been written. The folder is synced once, after the first line: the
+    file's name must reach the disk too, and later lines add no name (no folder sync per episode)."""
     log = EpisodeLog(tmp_path / "log.jsonl")
-    synced: list[bytes] = []
+    synced: list[tuple[str, bytes]] = []
     real_fsync = os.fsync
 
     def fsync(fd):
-        synced.append((tmp_path / "log.jsonl").read_bytes())  # what the file holds when it is made durable
+        what = "folder" if stat.S_ISDIR(os.fstat(fd).st_mode) else "file"
+        synced.append((what, (tmp_path / "log.jsonl").read_bytes()))  # the file when it is made durable
         real_fsync(fd)
 
     monkeypatch.setattr(os, "fsync", fsync)
     log.append({"key": "a", "x": 1})
     log.append({"key": "b", "x": 2})
-    assert synced == [b'{"key":"a","x":1}\n', b'{"key":"a","x":1}\n{"key":"b","x":2}\n']
+    first, both = b'{"key":"a","x":1}\n', b'{"key":"a","x":1}\n{"key":"b","x":2}\n'
+    assert synced == [("file", first), ("folder", first), ("file", both)]
 
 
 def test_the_repair_of_a_torn_tail_is_made_durable(tmp_path, monkeypatch):
