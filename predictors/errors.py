@@ -66,9 +66,16 @@ class CheckpointMismatch(PredictorError):
         self.expected = expected
         self.found = found
         super().__init__(
-            f"checkpoint {self.path} has sha256 {found}, but the manifest expects {expected}; "
-            "the file is corrupt or was replaced: restore it, or add the model again (`crowdmpc zoo add ... "
-            "--replace`); `crowdmpc zoo verify` lists every entry whose files differ"
+            f"{self.fault}: restore it, or add the model again (`crowdmpc zoo add ... --replace`); "
+            "`crowdmpc zoo verify` lists every entry whose files differ"
+        )
+
+    @property
+    def fault(self) -> str:
+        """What is wrong, without what to do: ``zoo verify`` says that in its own words."""
+        return (
+            f"checkpoint {self.path} has sha256 {self.found}, but the manifest expects {self.expected}; "
+            "the file is corrupt or was replaced"
         )
 
     def __reduce__(self) -> tuple[type, tuple[object, ...]]:

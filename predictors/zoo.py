@@ -23,12 +23,13 @@ from __future__ import annotations
 
 import importlib.resources
 import os
+import shlex
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
 from predictors.checkpoint import CheckedPair, read_checkpoint
-from predictors.errors import PredictorError
+from predictors.errors import CheckpointMismatch, PredictorError
 from predictors.home import expand_home, home_dir
 from predictors.manifest import (
     MANIFEST_NAME,
@@ -270,9 +271,27 @@ def verify_entries(user_dir: str | Path | None = None) -> list[tuple[Located, st
             continue
         try:
             results.append((located, disagreement(located, read_located(located).config)))
+        except CheckpointMismatch as exc:
+            results.append((located, _mismatch_line(exc, located, user_dir)))
         except PredictorError as exc:
             results.append((located, str(exc)))
     return results
+
+
+def _mismatch_line(exc: CheckpointMismatch, located: Located, user_dir: str | Path | None) -> str:
+    """``zoo verify``'s line of an entry whose file differs: what to do, not the loading refusal's advice to
+    run ``zoo verify``, the command that prints it."""
+    name = shlex.quote(located.entry.name)
+    if located.source == SHIPPED:  # read-only, but to maintainers (`zoo add --shipped`)
+        return (
+            f"{exc.fault}: restore it, or add the model again (maintainers: `crowdmpc zoo add --shipped "
+            f"FILE.pt --name {name} --replace`)"
+        )
+    option = "" if user_dir is None else f" --dir {shlex.quote(str(user_dir))}"
+    return (
+        f"{exc.fault}: restore it, add the model again (`crowdmpc zoo{option} add FILE.pt --name {name} "
+        f"--replace`) or remove it (`crowdmpc zoo{option} remove {name}`)"
+    )
 
 
 def disagreement(located: Located, config_bytes: bytes) -> str | None:
@@ -315,6 +334,8 @@ def verify(directory: str | Path | None = None) -> list[tuple[str, str | None]]:
         try:
             located = Located(USER, root, find_entry(name, root))  # the entry read once: the one loaded
             results.append((name, disagreement(located, read_located(located).config)))
+        except CheckpointMismatch as exc:
+            results.append((name, _mismatch_line(exc, located, root)))
         except PredictorError as exc:
             results.append((name, str(exc)))
     return results

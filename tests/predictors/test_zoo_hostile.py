@@ -238,6 +238,32 @@ def test_a_zoo_file_replaced_by_one_over_its_size_cap_is_named_as_replaced(zoo_d
     assert f"{path} has sha256" in out and "the file is corrupt or was replaced" in out
 
 
+@pytest.mark.parametrize("which", ["user", "user --dir", "shipped"])
+def test_verify_says_what_to_do_of_a_replaced_file(tmp_path, zoo_dir, monkeypatch, capsys, which):
+    """`zoo verify`'s line of a replaced file ended in the loading refusal's advice, "`crowdmpc zoo verify`
+    lists every entry whose files differ", the command just run; it now says how to mend the entry: add it
+    again with --replace or remove it (a user entry, the --dir given named), add it --shipped (a shipped
+    one)."""
+    tamper_weights(zoo_dir / f"{NAME}.pt")
+    args = ["zoo", "verify"]
+    if which == "shipped":
+        monkeypatch.setenv(zoo.CHECKPOINTS_ENV, str(zoo_dir))
+        monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "no_user_zoo"))
+    elif which == "user --dir":
+        monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "no_user_zoo"))
+        args = ["zoo", "--dir", str(zoo_dir), "verify"]
+    assert main(args) == 1
+    line = next(line for line in capsys.readouterr().out.splitlines() if line.startswith(NAME))
+    assert "has sha256" in line and "the file is corrupt or was replaced" in line
+    assert "zoo verify" not in line
+    if which == "shipped":
+        assert f"`crowdmpc zoo add --shipped FILE.pt --name {NAME} --replace`" in line
+        return
+    option = "" if which == "user" else f" --dir {zoo_dir}"
+    assert f"`crowdmpc zoo{option} add FILE.pt --name {NAME} --replace`" in line
+    assert f"`crowdmpc zoo{option} remove {NAME}`" in line
+
+
 def test_load_checkpoint_checks_both_expected_hashes(pair):
     weights, config = pair
     good = {"expected_sha256": sha256(weights), "expected_config_sha256": sha256(config)}
