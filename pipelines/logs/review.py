@@ -18,7 +18,7 @@ from typing import Any, Final
 
 import numpy as np
 
-from pipelines.logs.ending import ended_by, ends_count, ends_text, metric_rows
+from pipelines.logs.ending import ended_by, ends_count, ends_text, metric_rows, metric_shown
 from pipelines.logs.identity import differing_settings, null_none, recorded_plugins, shown
 from pipelines.logs.reader import Recording
 from pipelines.loop.record import step_time_stats
@@ -375,7 +375,10 @@ def compare_table(a: Recording, b: Recording) -> str:
     ]
     rows += [[key, shown(va), shown(vb)] for key, va, vb in differing_settings(a, b)]
     rows.append(["ended", sa["ended_by"], sb["ended_by"]])
-    rows += [[name, ma.get(name), mb.get(name)] for name in dict.fromkeys([*ma, *mb])]
+    for k in dict.fromkeys([*ma, *mb]):  # a contact's timeout worded as the single summary words it
+        rows.append(
+            [k, metric_shown(k, ma.get(k), sa["ended_by"]), metric_shown(k, mb.get(k), sb["ended_by"])]
+        )
     for key in ("median_ms", "p95_ms", "max_ms", "mean_iterations"):
         rows.append([key, sa["solver"].get(key), sb["solver"].get(key)])
     rows.append(["fallbacks", sa["solver"].get("fallbacks"), sb["solver"].get("fallbacks")])

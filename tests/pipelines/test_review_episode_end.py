@@ -100,8 +100,12 @@ def test_a_folders_table_and_a_comparison_say_what_ended_each_run(tmp_path, caps
     assert rows["contact/circle_seed000001.mcap"][5:9] == ["yes", "-", "0.368", "contact"]
     assert rows["limit/circle_seed000001.mcap"][5:9] == ["yes", "-", "1.41", "time_limit"]
     assert main(["review", str(contact), "--compare", str(limit)]) == 0
-    *_, row = [line for line in capsys.readouterr().out.splitlines() if line.startswith("ended ")]
+    lines = capsys.readouterr().out.splitlines()
+    *_, row = [line for line in lines if line.startswith("ended ")]
     assert row.split()[1:] == ["contact", "time_limit"]  # the comparison's, after A's summary
+    # the comparison's timeout row as the summary words it: a bare "yes" read as the time limit's
+    *_, row = [line for line in lines if line.startswith("timeout ")]
+    assert row.split(None, 1)[1].rstrip().endswith("the time limit did not end it)  yes")
 
 
 def test_the_folders_totals_count_what_ended_its_episodes(tmp_path, capsys):
