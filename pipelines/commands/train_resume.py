@@ -18,6 +18,13 @@ from predictors.errors import PredictorError
 
 # What fixes a training run: --resume continues it with these, and only --epochs may change.
 SETTINGS_FILE = "train_settings.json"
+# Every key a run's settings file has held, in any version (run_settings, train_data.data_settings, and the
+# code train_fit adds): a key besides them is a misspelt edit, which a resume ignored and then refused the run
+# by the default that stood in for it ("seed: checkpoint 5, now 0").
+SETTINGS_KEYS: Final[tuple[str, ...]] = (
+    *("name", "model", "net_config", "lr", "step_size", "loss", "variety_error", "seed", "batch_size"),
+    *("batching", "limit_batches", "patience", "epochs", "files", "data", "data_dir", "data_sha256", "code"),
+)
 # The paths of checkpoints a Lightning ModelCheckpoint's state holds, besides its best_k_models' keys.
 _PATH_KEYS = ("best_model_path", "last_model_path", "kth_best_model_path")
 # The best checkpoints' names: Lightning writes "{epoch:03d}" as epoch=001 (train_fit's callback).
@@ -109,6 +116,12 @@ def read_run_settings(out: Path) -> dict[str, Any] | None:
         raise PipelineError(f"--resume: {path} is not readable JSON ({exc})") from None
     if not isinstance(recorded, dict):
         raise PipelineError(f"--resume: {path} is not a JSON object of settings; the run's file is damaged")
+    unknown = [key for key in recorded if key not in SETTINGS_KEYS]
+    if unknown:
+        raise PipelineError(
+            f"--resume: {path} holds the key {unknown[0]!r}, which crowdmpc train never writes (edited?); "
+            f"the file holds only {', '.join(SETTINGS_KEYS)}"
+        )
     return recorded
 
 

@@ -1299,3 +1299,21 @@ def test_a_checkpoint_save_stopped_by_a_kill_leaves_no_copy_past_the_next_run(tm
     assert main([*args, "--resume"]) == 0
     assert [p.name for p in (out / "checkpoints").iterdir() if not p.name.endswith(".ckpt")] == []
     assert (out / "walker.metrics.json").is_file()
+
+
+def test_a_resume_refuses_a_key_its_settings_file_never_held(trained, capsys):
+    """A misspelt key ("seed" edited to "sed") was ignored: the resume took the default seed in its place and
+    refused the run as "seed: checkpoint ..., now 0", naming neither the file nor the key. It is refused by
+    name now; the file as train wrote it holds only keys a run's file may hold."""
+    from pipelines.commands.train_resume import SETTINGS_KEYS
+
+    out, args = trained
+    path = out / "train_settings.json"
+    settings = json.loads(path.read_text())
+    assert set(settings) <= set(SETTINGS_KEYS)
+    settings["sed"] = settings.pop("seed")
+    path.write_text(json.dumps(settings))
+    assert main([*[a if a != "1" else "2" for a in args], "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{path} holds the key 'sed', which crowdmpc train never writes" in err
+    assert "the file holds only name, model, " in err and "seed: checkpoint" not in err
