@@ -9,7 +9,8 @@ from typing import TYPE_CHECKING
 from pipelines.commands import check_writable, comma_items, humans_list, path_arg
 from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.simulate_checks import check_mpc_solvable
-from pipelines.commands.sweep_checks import check_first_episodes, check_plan, noted_models
+from pipelines.commands.sweep_checks import check_plan, noted_models
+from pipelines.commands.sweep_first_episodes import check_first_episodes
 from pipelines.commands.sweep_help import EPILOG
 from pipelines.commands.sweep_jit import check_compile_cache, choose_jit
 from pipelines.commands.sweep_plan import check_iterations_recorded, check_world, configured_experiment
@@ -271,10 +272,7 @@ def run(args: argparse.Namespace) -> int:
     cells = experiment.cells(config.humans, config.n_robots)
     models = None  # the predictors the notes and the plan's checks read, read once for both
     if not args.report_only:
-        models = noted_models(experiment, cfg, cells)
-        from pipelines.commands.calibrate_store import take_back_before_planning
-
-        take_back_before_planning(cell.spec.margins for cell in cells)  # a killed calibrate's blocks out
+        models = noted_models(experiment, cfg, cells)  # a killed calibrate's blocks taken out first
     if args.dry_run:
         check_plan(experiment, cfg, models)  # a plan whose every episode would fail is not fine
         check_first_episodes(tasks)

@@ -22,16 +22,14 @@ from pipelines.commands.team_notes import flock_note, goal_room_note, separate_g
 from pipelines.config.schema import MPC_FROM_WORLD
 from pipelines.errors import PipelineError
 
-# The first episodes of a crowd, size, team and scenario drawn before a sweep runs (check_first_episodes)
-FIRST_TRIES: Final[int] = 8
-
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Mapping
 
     from mpc.config import MPCConfig
     from pipelines.config import RunConfig
     from pipelines.experiments.cells import Experiment
-    from pipelines.experiments.tasks import Cell, EpisodeTask
+    from pipelines.experiments.tasks import Cell
+    from pipelines.loop.margins import Located
     from predictors.base import Predictor
     from predictors.manifest import ZooEntry
 
@@ -41,6 +39,8 @@ class PlanModels(NamedTuple):
 
     loaded: dict[str, Predictor]  # the zoo models the plan's methods plan with, by name
     entries: dict[str, ZooEntry]  # the zoo entry each of them loads (a registered predictor has none)
+    # the calibration block each method plans with, by label (``check_margins``'), None: not checked yet
+    blocks: dict[str, Located | None] | None = None
 
 
 def check_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None = None) -> PlanModels:
@@ -96,11 +96,14 @@ def check_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None
 
 
 def noted_models(experiment: Experiment, cfg: RunConfig | None, cells: Iterable[Cell]) -> PlanModels:
-    """The installed controllers' and ``check_predictors``' checks of the plan, then the ``method_notes`` of
-    its ``cells`` printed, of the entries those checks located: the manifest read once for both, where read
-    apart a `zoo add --replace` between the reads had the notes describe other models than were checked.
-    A refusal comes after the notes, as it did when the whole ``check_plan`` followed them (the notes then
-    locate the entries themselves)."""
+    """The installed controllers' and ``check_predictors``' checks of the plan, a killed calibrate's blocks
+    taken back and ``check_margins``, then the ``method_notes`` of its ``cells`` printed, of the entries and
+    blocks those checks located: the manifest and the calibrations read once for both, where read apart
+    (the manifest and the calibrations once a calibration note) a `zoo add --replace` or a calibrate run
+    between the reads had the notes describe other models or blocks than were checked. A refusal comes
+    after the notes, as it did when the whole ``check_plan`` followed them (the notes then look the entries
+    and blocks up themselves); the margins' is ``check_plan``'s, in its turn after the couplings'."""
+    from pipelines.commands.calibrate_store import take_back_before_planning
     from pipelines.loop.spec import controller_names
     from predictors.errors import PredictorError
 
@@ -108,11 +111,16 @@ def noted_models(experiment: Experiment, cfg: RunConfig | None, cells: Iterable[
     try:
         controller_names()
         models = check_predictors(experiment, {} if cfg is None else _predictors_chosen(cfg))
+        take_back_before_planning(cell.spec.margins for cell in cells)  # before any block is read
     except (PipelineError, PredictorError):
         for note in method_notes(cells):
             print(note, file=sys.stderr)
         raise
-    for note in method_notes(cells, models.entries):
+    try:
+        models = models._replace(blocks=check_margins(experiment, models.loaded))
+    except (PipelineError, ValueError, OSError):  # check_plan runs it again, after the couplings' check
+        pass
+    for note in method_notes(cells, models.entries, models.blocks):
         print(note, file=sys.stderr)
     return models
 
@@ -128,7 +136,7 @@ def check_plan(
     With the run's ``cfg``, a refusal of a value the run chose names where it chose it first ("run.toml:
     mpc.d_min: method 'CMPC' of ..."), as simulate's do: they named the method alone, and a file's value
     looked like one of the experiment's. ``models``: ``check_predictors``' as ``noted_models`` made them
-    (None: made here)."""
+    (None: made here), with the blocks ``check_margins`` located where it passed there (not checked again)."""
     from pipelines.loop.spec import controller_names
 
     controller_names()
@@ -141,7 +149,8 @@ def check_plan(
             (("controller", "coupling"), ("controller", "predictor"), ("sweep", "predictors")),
         ),
         (
-            partial(check_margins, loaded=loaded),
+            # passed in noted_models, whose notes describe the blocks it located: not read again
+            (lambda _: None) if models.blocks is not None else partial(check_margins, loaded=loaded),
             (("controller", "margins"), ("mpc", "horizon"), *SENSING_KEYS),
         ),
         (check_contact_distances, (("mpc", "d_min"),)),
@@ -248,17 +257,21 @@ def _each_mpc(experiment: Experiment, check: Callable[[MPCConfig], None], refusa
             raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
 
 
-def check_margins(experiment: Experiment, loaded: Mapping[str, Predictor] | None = None) -> None:
+def check_margins(
+    experiment: Experiment, loaded: Mapping[str, Predictor] | None = None
+) -> dict[str, Located | None]:
     """Every method's margins resolve (a calibration that matches the weights, with per-class margins for the
     per-human modes) before workers start; refused with the method named, as the other checks are: --vary
     mpc.horizon=4,6 with conformal margins was told to 'plan with a horizon of at most 4 (mpc.horizon)',
     a setting it never gave, without the column that asked for 6. ``loaded``: as ``check_couplings``'; the
-    margins are looked up for the weights those hold (the manifest, read again, may name others)."""
+    margins are looked up for the weights those hold (the manifest, read again, may name others). Returns
+    the block each method plans with (``MarginSpec.located``'s), by label, for its notes."""
     from pipelines.loop.mpc_setup import mpc_config
     from predictors.registry import checkpoint_sha256, loaded_sha256
 
     loaded = loaded or {}
     blocks: dict[tuple[Any, ...], Any] = {}  # Table II's CMPC and DMPC plan with one block: read once
+    planned: dict[str, Located | None] = {}
     for label, spec in experiment.methods:
         name = spec.predictor_name
         predictor = loaded.get(name) if name is not None else None
@@ -275,9 +288,15 @@ def check_margins(experiment: Experiment, loaded: Mapping[str, Predictor] | None
             margins.resolve_classes(name, horizon, sha256, at)
         except PipelineError as exc:
             raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
+        planned[label] = at
+    return planned
 
 
-def method_notes(cells: Iterable[Cell], entries: Mapping[str, ZooEntry] | None = None) -> list[str]:
+def method_notes(
+    cells: Iterable[Cell],
+    entries: Mapping[str, ZooEntry] | None = None,
+    blocks: Mapping[str, Located | None] | None = None,
+) -> list[str]:
     """simulate's ``separate_goals_note`` lines (robots trading places whom every pair flocking holds
     together: each worker's controller said it, and leaves it out now), ``goal_room_note`` lines (a d_min
     that leaves two robots no room at their goals), ``horizon_note`` lines (a plan longer than the learned
@@ -290,7 +309,8 @@ def method_notes(cells: Iterable[Cell], entries: Mapping[str, ZooEntry] | None =
     ``calibration_physics_note`` lines (in another crowd's motion, [env] / [env.orca]), each once, naming
     the methods it applies to: a grid of --vary columns printed the same line for each of eight methods.
     ``entries``: the zoo entry each zoo predictor loads, located already (``check_predictors``'; None:
-    located here)."""
+    located here); ``blocks``: the block each method plans with, by label (``check_margins``'; None: each
+    calibration note looks it up)."""
     methods: dict[str, list[str]] = {}  # a note's text -> the methods it applies to, in table order
     seen: set[str] = set()
     cells = list(cells)
@@ -307,6 +327,9 @@ def method_notes(cells: Iterable[Cell], entries: Mapping[str, ZooEntry] | None =
             continue
         seen.add(cell.method)
         env = cell.world.env_config()
+        at = ... if blocks is None else blocks.get(cell.method, ...)
+        view = cell.world.sensor_range, cell.world.sensor_tracks
+        block = at if at is ... or at is None else at[1]
         for note in (
             separate_goals_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
             goal_room_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
@@ -322,21 +345,16 @@ def method_notes(cells: Iterable[Cell], entries: Mapping[str, ZooEntry] | None =
                 cell.world.crowd,
                 cell.world.sensor_range,
                 cell.world.sensor_tracks,
+                as_read=block,
             ),
-            sensor_margins_note(cell.spec, cell.world.sensor_range, cell.world.sensor_tracks),
-            calibration_controller_note(cell.spec, cell.world.sensor_range, cell.world.sensor_tracks),
-            calibration_team_note(
-                cell.spec,
-                sizes[cell.method],
-                cell.n_robots,
-                cell.world.sensor_range,
-                cell.world.sensor_tracks,
-            ),
+            sensor_margins_note(cell.spec, *view, as_read=block),
+            calibration_controller_note(cell.spec, *view, as_read=block),
+            calibration_team_note(cell.spec, sizes[cell.method], cell.n_robots, *view, as_read=block),
             calibration_physics_note(
                 cell.spec,
                 [f"{k} {v}" for k, v in cell.world.env_settings if k in CROWD_SETTINGS],
-                cell.world.sensor_range,
-                cell.world.sensor_tracks,
+                *view,
+                as_read=block,
             ),
         ):
             if note is not None:
@@ -347,50 +365,3 @@ def method_notes(cells: Iterable[Cell], entries: Mapping[str, ZooEntry] | None =
         )
         for note, named in methods.items()
     ]
-
-
-def check_first_episodes(tasks: Iterable[EpisodeTask]) -> None:
-    """PipelineError naming the cell when a crowd cannot give any of the first ``FIRST_TRIES`` episodes of a
-    scenario: a replayed crowd's recording no window (too many humans for it, say), ORCA's humans no
-    placement (a spawn separation too wide for the arena). Every such episode raised in the workers, each
-    after its NLPs were built (42 s for the four cells of Table II at 50 humans), with a traceback in
-    errors.jsonl for the reason; ``--vary env.spawn_separation=0.1,30`` recorded the circle's episodes at 30
-    m that way and tabled its perpendicular ones alone. Each crowd, size, team and scenario's first episodes
-    are drawn here, as they would be; one that some of them can draw is left to run (the draw depends on the
-    seed: at 46 of ETH's people about half the seeds find a window), its failures recorded as before."""
-    from crowdsim.env import CrowdEnv
-    from crowdsim.errors import SimulationError
-    from pipelines.loop.episode import replayed_recording
-
-    # (crowd's config, humans, robots, scenario) -> its first cell's label and its episodes' seeds, in order
-    firsts: dict[tuple[Any, ...], tuple[str, dict[int, None]]] = {}
-    configs: dict[Cell, Any] = {}  # each cell's, built once, not once a task
-    for task in tasks:
-        cell = task.cell
-        if cell not in configs:
-            configs[cell] = cell.world.env_config()
-        key = (configs[cell], cell.n_humans, cell.n_robots, task.scenario)
-        firsts.setdefault(key, (cell.method, {}))[1][task.seed] = None
-    envs: dict[Any, CrowdEnv] = {}
-    for (config, n_humans, n_robots, scenario), (method, seeds) in firsts.items():
-        if config not in envs:
-            envs[config] = CrowdEnv(config, replayed_recording(config))
-        failed: SimulationError | None = None
-        for seed in list(seeds)[:FIRST_TRIES]:
-            try:
-                envs[config].reset(seed, scenario, n_humans, n_robots)
-                break
-            except SimulationError as exc:
-                failed = exc
-        else:
-            tried = min(len(seeds), FIRST_TRIES)
-            which = (
-                f"its first {scenario} episode"
-                if tried == 1
-                else f"any of its first {tried} {scenario} episodes"
-            )
-            where = f"cell {method!r} at {n_humans} humans, crowd {config.crowd}"
-            gives = (
-                "the recording gives no window" if config.crowd != "orca" else "the humans cannot be placed"
-            )
-            raise PipelineError(f"{where}: {gives} for {which}: {failed}")

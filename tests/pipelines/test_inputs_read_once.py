@@ -167,3 +167,20 @@ def test_a_refused_sweep_plan_says_its_notes_first(tmp_path, capsys):
     assert main(["sweep", *plan, *refused, "--dry-run", "--out", str(tmp_path / "sweep")]) == 2
     err = capsys.readouterr().err
     assert err.index("trained to predict 12") < err.index("covers 4 steps"), err
+
+
+def test_a_sweeps_calibration_notes_read_the_blocks_its_margins_check_read(tmp_path, monkeypatch, capsys):
+    """Each calibration note looked its block up again (the manifest for the weights' sha256, then the
+    calibrations), once a method, beside check_margins' own lookup: a calibrate run between the reads had
+    the notes describe another block than was checked and planned with."""
+    from pipelines.cli import main
+    from predictors import zoo
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    shipped = zoo.checkpoints_dir().resolve()
+    opened = count_opens(monkeypatch, ".json")
+    plan = ["--experiment", "coupling", "--humans", "5,40", "--episodes", "1", "--margins", "conformal:0.1"]
+    assert main(["sweep", *plan, "--dry-run", "--out", str(tmp_path / "sweep")]) == 0
+    assert "were calibrated with 3 robots among 5-9 humans" in capsys.readouterr().err  # of that block
+    assert opened[shipped / "manifest.json"] == 1
+    assert opened[shipped / "calibrations.json"] == 1
