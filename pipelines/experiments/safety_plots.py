@@ -43,10 +43,16 @@ LEGEND_GAP: Final[float] = (
 )
 LEGEND_LINE: Final[float] = 0.2  # in, a line of a "small" legend
 LEGEND_MARGIN: Final[float] = 0.2  # in between the legends of two panels side by side
-# Where a label may stand from its point (points): the four corners, then above, below, further out.
-_OFFSETS: Final[tuple[tuple[int, int], ...]] = tuple(
-    (sx * r, sy * r) for r in (5, 14, 26) for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1))
-) + ((0, 12), (0, -12), (0, 30), (0, -30))
+# Where a label may stand from its point (points): the four corners, then above, below, further out. The
+# two farthest rings come after every nearer place, so a label clear within 30 pt stands where it stood; they
+# are for a point in a panel's corner whose neighbour's label of three lines (three methods at one point)
+# filled every nearer place the panel leaves (a corner label had been laid over it).
+_OFFSETS: Final[tuple[tuple[int, int], ...]] = (
+    tuple((sx * r, sy * r) for r in (5, 14, 26) for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)))
+    + ((0, 12), (0, -12), (0, 30), (0, -30))
+    + tuple((sx * r, sy * r) for r in (46, 66) for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)))
+    + ((0, 50), (0, -50), (0, 70), (0, -70))
+)
 
 
 def _panels(count: int, ncols: int, height: float, title: str, **kwargs: Any) -> tuple[Any, list[Any]]:

@@ -285,3 +285,27 @@ def test_compare_at_one_crowd_size_draws_each_team_apart():
         xs = {float(x) for line in points for x in line.get_xdata()}
         assert len(xs) == 2
     assert [t.get_text() for t in fig.legends[0].get_texts()] == ["3 robots: b − a", "6 robots: b − a"]
+
+
+def test_a_label_beside_a_corner_point_clears_a_shared_points_label():
+    """A sweep of two controllers, `--vary scenario.robots=1,3`, at 5 humans: three methods at (83 %, 100 %)
+    and one at (100 %, 100 %), the panel's top right corner. The corner's label found no offset clear of the
+    three-line label beside it (all within 26 pt of the point) and was laid over it, "orca robots=1, 10.9 s"
+    unreadable under "orca robots=3, 12.0 s"."""
+    experiment = _varied_d_min()
+    cells = experiment.cells((5,))
+    counts = {0: (6, 5), 1: (6, 6), 2: (6, 5), 3: (6, 5)}
+    records = [
+        _record(c, i, 1.0, 27, success=i < counts[k][0], collision=i < counts[k][1])
+        for k, c in enumerate(cells)
+        for i in range(6)
+    ]
+    fig = safety_tradeoff_figure(experiment, summarize(experiment, cells, records))
+    renderer = _drawn(fig)
+    (ax,) = fig.axes
+    boxes = [t.get_window_extent(renderer) for t in ax.texts]
+    assert len(boxes) == 2
+    frame = ax.get_window_extent(renderer)
+    for box in boxes:
+        assert frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1
+    assert not boxes[0].overlaps(boxes[1])
