@@ -373,7 +373,7 @@ def _report(
     print(format_table(summary, header, env_config.radius, cfg.mpc.time_limit_s))
     write_json(resolved.json, run_meta, results, configs, interrupted, failure, summary)
     if resolved.plot is not None:
-        plot_first_episode(resolved.plot, spec.controller, results[0], env_config)
+        plot_first_episode(resolved.plot, spec.controller, results[0], env_config, cfg.simulate.sensor_range)
     if recorder is not None:
         print(recorder.written_line(finished=len(results)))
 

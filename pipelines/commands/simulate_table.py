@@ -227,20 +227,43 @@ def plot_title(controller: str, episode: EpisodeResult) -> str:
     return f"{who}, {crowd}\n{outcome}, {closest}"
 
 
-def plot_first_episode(path: Path, controller: str, first: EpisodeResult, env_config: EnvConfig) -> None:
-    """simulate's --plot: the first episode's paths, titled by ``plot_title``."""
-    from crowdsim.plotting import plot_episode
+def plot_first_episode(
+    path: Path,
+    controller: str,
+    first: EpisodeResult,
+    env_config: EnvConfig,
+    sensor_range: float | None = None,
+) -> None:
+    """simulate's --plot: ``first_episode_figure`` written to ``path``."""
+    fig = first_episode_figure(controller, first, env_config, sensor_range)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    save_figure(path, lambda name: fig.savefig(name, dpi=120, bbox_inches="tight"))
+    print(f"wrote {path}")
 
-    title = plot_title(controller, first)
+
+def first_episode_figure(
+    controller: str, first: EpisodeResult, env_config: EnvConfig, sensor_range: float | None = None
+) -> Any:
+    """The first episode's paths, titled by ``plot_title``, with each robot's sensor range at each snapshot
+    behind ``--sensor-range`` (as review --plot draws it from the recording: without it the figure of a run
+    behind a sensor looked like one that saw every human)."""
+    from crowdsim.plotting import default_snapshots, plot_episode
+    from pipelines.logs.plots import draw_sensor_ranges
+
     fig = plot_episode(
         first.robot_positions,
         first.human_positions,
         first.robot_goals,
-        title=title,
+        title=plot_title(controller, first),
         radius=env_config.radius,
         dt=env_config.dt,
         human_present=first.human_present,
     )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    save_figure(path, lambda name: fig.savefig(name, dpi=120, bbox_inches="tight"))
-    print(f"wrote {path}")
+    if sensor_range is not None:
+        ax = fig.axes[0]
+        draw_sensor_ranges(
+            ax, first.robot_positions, default_snapshots(len(first.robot_positions)), sensor_range
+        )
+        # plot_episode's legend was made before the circles: again, to name them
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, framealpha=0.8)
+    return fig

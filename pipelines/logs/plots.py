@@ -97,8 +97,8 @@ def _recording_figure(
     sensor = sensor_radius(rec)
     for k, row in enumerate(rows):
         _draw_plans(ax, view, row, label=k == 0)
-        if sensor is not None:
-            _draw_sensor(ax, view, row, sensor, label=k == 0)
+    if sensor is not None:
+        draw_sensor_ranges(ax, view.robot_positions, rows, sensor)
     drawn = [float(view.times[r]) for r in rows]
     # What the file holds: an ORCA or straight run records neither plans nor predictions, and its title
     # promised them all the same.
@@ -125,13 +125,13 @@ def sensor_radius(rec: Recording) -> float | None:
     return recorded_sensor_range(rec.config())
 
 
-def _draw_sensor(ax: Any, view: EpisodeView, row: int, radius: float, *, label: bool) -> None:
-    """Each robot's sensor range at state ``row``: a dashed circle in its colour (a human outside every
-    circle was not seen then)."""
-    for i, centre in enumerate(view.robot_positions[row]):
-        ax.add_patch(
-            _sensor_circle(centre, radius, i, f"sensor range ({radius:g} m)" if label and i == 0 else None)
-        )
+def draw_sensor_ranges(ax: Any, robot_positions: Any, rows: Sequence[int], radius: float) -> None:
+    """Each robot's sensor range at each state of ``rows`` (``robot_positions`` ``(T, M, 2)`` m): a dashed
+    circle in its colour (a human outside every circle was not seen then), named once in the legend."""
+    for k, row in enumerate(rows):
+        for i, centre in enumerate(robot_positions[row]):
+            label = f"sensor range ({radius:g} m)" if k == 0 and i == 0 else None
+            ax.add_patch(_sensor_circle(centre, radius, i, label))
 
 
 def _sensor_circle(centre: Any, radius: float, robot: int, label: str | None = None) -> Any:

@@ -141,3 +141,31 @@ def test_a_run_that_sees_everyone_draws_no_sensor(tmp_path, capsys):
     fig, _ = recording_figure(rec)
     assert not any("sensor" in t.get_text() for t in fig.axes[0].get_legend().get_texts())
     assert not any(e["id"] == "sensors" for m in rec.data("/scene") for e in m["entities"])
+
+
+@pytest.mark.parametrize("sensor", [["--sensor-range", "3"], []])
+def test_simulate_plot_draws_the_sensor_range_of_a_run_behind_one(sensor, tmp_path, capsys, monkeypatch):
+    """simulate --plot drew a run behind --sensor-range as one that saw every human, where review --plot of
+    its recording drew each robot's range; now a dashed 3 m circle per robot and snapshot, named in the
+    legend, and none for a run without a sensor."""
+    from matplotlib.patches import Circle
+
+    import pipelines.commands.simulate_table as simulate_table
+
+    figures = []
+    original = simulate_table.first_episode_figure
+    monkeypatch.setattr(
+        simulate_table, "first_episode_figure", lambda *a: figures.append(original(*a)) or figures[-1]
+    )
+    options = ["--humans", "3", "--robots", "2", "--plot", str(tmp_path / "p.png"), "--no-progress"]
+    assert main(["simulate", "--controller", "orca", *options, *sensor]) == 0
+    capsys.readouterr()
+    (fig,) = figures
+    ax = fig.axes[0]
+    ranges = [p for p in ax.patches if isinstance(p, Circle) and p.radius == 3.0]
+    legend = {t.get_text() for t in ax.get_legend().get_texts()}
+    if sensor:
+        assert len(ranges) == 2 * 5 and "sensor range (3 m)" in legend  # robots x snapshots
+        assert all(p.get_linestyle() == "--" for p in ranges)
+    else:
+        assert not ranges and not any("sensor" in text for text in legend)
