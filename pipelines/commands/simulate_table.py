@@ -199,10 +199,11 @@ def _cut_short_rows(summary: dict[str, Any], time_limit_s: float | None) -> list
     return found
 
 
-def plot_title(controller: str, episode: EpisodeResult) -> str:
+def plot_title(controller: str, episode: EpisodeResult, crowd: str = "orca") -> str:
     """What the --plot figure shows: who drove (with its predictor), the crowd, the seed; then how it ended
     and how close a robot came to a human, with the collision or contact the metrics counted, and two robots
-    touching each other, at their closest (between steps where the record has it). The title
+    touching each other, at their closest (between steps where the record has it). ``crowd``: the
+    simulator's (EnvConfig.crowd), named when replayed, which a title of the scenario alone hid. The title
     once named neither predictor nor crowd, called a run through a human a "success" with nothing more,
     and gave "min robot-human distance inf m" for an episode without humans."""
     m = episode.metrics
@@ -210,7 +211,8 @@ def plot_title(controller: str, episode: EpisodeResult) -> str:
     seed = "" if episode.seed is None else f", seed {episode.seed}"
     robots = f"{episode.n_robots} robot" + ("s" if episode.n_robots != 1 else "")
     humans = f"{episode.n_humans} human" + ("s" if episode.n_humans != 1 else "")
-    crowd = f"{episode.scenario}, {robots}, {humans}{seed}"
+    replayed = "" if crowd == "orca" else f", crowd {crowd}"
+    crowd = f"{episode.scenario}, {robots}, {humans}{replayed}{seed}"
     outcome = f"success in {m.travel_time:g} s" if m.success else "timeout"
     if episode.n_humans == 0:
         closest = "no humans"
@@ -254,7 +256,7 @@ def first_episode_figure(
         first.robot_positions,
         first.human_positions,
         first.robot_goals,
-        title=plot_title(controller, first),
+        title=plot_title(controller, first, env_config.crowd),
         radius=env_config.radius,
         dt=env_config.dt,
         human_present=first.human_present,

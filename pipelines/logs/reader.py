@@ -152,8 +152,12 @@ class Recording:
     @property
     def label(self) -> str:
         ep = self.episode()
-        parts = [ep.get("controller"), ep.get("predictor"), ep.get("scenario"), f"seed {ep.get('seed', '?')}"]
-        return " / ".join(p for p in parts if p)
+        env = self.config().get("env")
+        crowd = env.get("crowd") if isinstance(env, dict) else None
+        # a replayed crowd's people are not the scenario's: the figures of an eth_test run read as ORCA's
+        replayed = f"crowd {crowd}" if isinstance(crowd, str) and crowd != "orca" else None
+        parts = [ep.get("controller"), ep.get("predictor"), ep.get("scenario"), replayed]
+        return " / ".join(p for p in [*parts, f"seed {ep.get('seed', '?')}"] if p)
 
 
 def _start_time_problem(metadata: dict[str, dict[str, str]]) -> str | None:

@@ -275,3 +275,43 @@ def test_a_crowd_the_recording_cannot_give_is_refused_before_any_nlp_is_built(
     # a crowd whose first episodes can be drawn in part runs, its failures recorded as before
     assert run_cli(capsys, *argv[:-2], "--humans", "46", "--seed", "3", "--episodes-per-cell", "20",
                    "--dry-run", "--out", str(out))[0] == 0  # fmt: skip
+
+
+def test_the_figures_of_a_replayed_run_name_its_crowd(data, tmp_path, capsys, monkeypatch):
+    """simulate --plot titled an eth_test run "orca, circle, 3 robots, 2 humans, seed 0" and review --plot,
+    --animate and --compare "orca / circle / seed 0", as if ORCA's people had crossed the circle; both name
+    the replayed crowd now, and a run among ORCA's people is titled as before."""
+    import pipelines.commands.simulate_table as simulate_table
+    from pipelines.logs.plots import recording_figure
+    from pipelines.logs.reader import read_recording
+
+    figures = []
+    original = simulate_table.first_episode_figure
+    monkeypatch.setattr(
+        simulate_table, "first_episode_figure", lambda *a: figures.append(original(*a)) or figures[-1]
+    )
+    titles = []
+    for crowd in ("eth_test", "orca"):
+        rec = tmp_path / crowd
+        argv = [
+            "simulate",
+            "--controller",
+            "orca",
+            "--crowd",
+            crowd,
+            "--humans",
+            "2",
+            "--plot",
+            str(rec / "p.png"),
+        ]
+        code, _, _ = run_cli(capsys, *argv, "--record", str(rec), "--no-progress")
+        assert code == 0
+        (path,) = rec.glob("*.mcap")
+        titles.append(
+            (figures[-1].axes[0].get_title(), recording_figure(read_recording(path))[0].axes[0].get_title())
+        )
+    (replayed, replayed_review), (orca, orca_review) = titles
+    assert replayed.startswith("orca, circle, 3 robots, 2 humans, crowd eth_test, seed 0\n")
+    assert replayed_review.startswith("orca / circle / crowd eth_test / seed 0\n")
+    assert orca.startswith("orca, circle, 3 robots, 2 humans, seed 0\n")
+    assert orca_review.startswith("orca / circle / seed 0\n")
