@@ -22,6 +22,8 @@ MAX_LEVEL_NOTES: Final[int] = 8
 # The room added above the travel panel's points for "n = 1", as a fraction of their range (level, upright):
 # a line of the small font, or the words upright, in a panel about 2.4 in high.
 HEAD_ROOM: Final[tuple[float, float]] = (0.12, 0.3)
+# A panel without a point (no episode completed by both runs): its axis either side of zero, in its unit.
+EMPTY_SPAN: Final[float] = 1.0
 
 
 def _change(versus: Mapping[str, Any], panel: str) -> tuple[float | None, float | None, float | None]:
@@ -62,6 +64,7 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
     figure = Figure(figsize=(9.6, 7.0), layout="constrained")
     axes = list(figure.subplots(2, 2, sharex=True).flat)
     notes: dict[int, list[tuple[float, int | None, dict[str, str]]]] = {}  # per x position (_mark_travel)
+    pointed: set[str] = set()  # the panels with a point of some series
     for k, (name, points) in enumerate(series.items()):
         offset = SPREAD * ((k + 0.5) / len(series) - 0.5)
         look = method_style(k)  # past ten series, other colours and markers rather than C0 again
@@ -76,6 +79,7 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
                     notes.setdefault(at, []).append((x, pairs, look))
                 if y is None:
                     continue
+                pointed.add(panel)
                 xs.append(x)
                 ys.append(y)
                 below.append(0.0 if low is None else y - low)
@@ -91,8 +95,10 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
                 marker=look["marker"],
                 color=look["color"],
             )
-    for ax, (_, title) in zip(axes, PANELS, strict=True):
+    for ax, (panel, title) in zip(axes, PANELS, strict=True):
         ax.axhline(0.0, color="0.5", linewidth=0.8)
+        if panel not in pointed:  # the zero line alone gave a range of 1e-17 s, zero off it
+            ax.set_ylim(-EMPTY_SPAN, EMPTY_SPAN)
         ax.set_title(title, fontsize=10)
         ax.grid(alpha=0.3)
         ax.set_xticks(range(len(ticks)), list(ticks.values()))

@@ -130,3 +130,26 @@ def test_compare_notes_of_methods_at_one_crowd_size_neither_collide_nor_leave_th
     assert texts.count("n = 1") == len(sizes) and "none completed by both" in texts
     heads = [box for box, t in zip(boxes, texts, strict=True) if t == "n = 1"]
     assert all(box.y0 > points[:, 1].max() for box in heads)  # above every point, in room of their own
+
+
+def test_a_travel_panel_without_any_pair_keeps_its_zero_line_on_a_scale_of_seconds():
+    """`compare full=A short=B` where B's time limit left no episode completed by both: the travel panel had
+    no point to scale by, and its y axis ran from 1.32e-17 to 1.46e-17 s, the zero line off it and the open
+    markers at a height that read as a change. Its axis now spans a second either side of zero."""
+    from pipelines.experiments.compare_plot import compare_figure
+    from tests.pipelines.test_plots_readable import _drawn, _report
+
+    report = _report([("orca", 5)])
+    report["groups"][0]["versus_first"]["b"]["travel_difference"] = {
+        "mean": None,
+        "half_width_95": None,
+        "n": 0,
+    }
+    fig = compare_figure(report)
+    _drawn(fig)
+    travel = fig.axes[-1]
+    low, high = travel.get_ylim()
+    assert low <= -1.0 and 1.0 <= high and high - low < 10.0
+    assert "none completed by both" in [t.get_text() for t in travel.texts]
+    for ax in fig.axes[:-1]:  # the rates' panels keep their points' scale
+        assert ax.get_ylim()[0] < -5.0
