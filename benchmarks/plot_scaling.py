@@ -28,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import check_not_input, run_main  # noqa: E402
 
 CONTROL_PERIOD_MS = 400.0  # the paper's dt = 0.4 s: a step slower than this misses its period
+EMPTY_WHAT = {"robots": "robots M", "humans": "humans N"}  # a panel's axis, as its note names it
 
 
 class Point(NamedTuple):
@@ -154,6 +155,10 @@ def figure(pts: list[Point]) -> Any:
         axes[1, col].xaxis.set_major_locator(MaxNLocator(integer=True))  # counts: no 3.5 robots
         if lines:
             axes[0, col].legend(fontsize=8)
+        else:  # said on the terminal only, the figure showed bare axes from 0 to 1 robot or human
+            for ax in axes[:, col]:
+                ax.text(0.5, 0.5, f"no two rows differ in {EMPTY_WHAT[along]} alone", transform=ax.transAxes,
+                        ha="center", va="center", color="0.4")  # fmt: skip
         for ax in axes[:, col]:
             ax.grid(alpha=0.3)
     axes[0, 0].set_title("against the number of robots")
@@ -208,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
             f"  not drawn (no row to make a line with): {p.controller} {p.goals} goals, M={p.robots}, "
             f"N={p.humans}"
         )
-    for along, what in (("robots", "robots M"), ("humans", "humans N")):
+    for along, what in EMPTY_WHAT.items():
         if not series(pts, along):
             print(f"  the panels against {what} are empty: no two rows differ in {what} alone")
     return 0

@@ -149,3 +149,16 @@ def test_success_is_drawn_with_its_interval_when_the_rows_give_their_episodes():
     assert lows == pytest.approx((92.9, 83.8), abs=0.05) and highs == pytest.approx((100.0, 97.9), abs=0.05)
     old = plot_scaling.points([("m.json", M_RUN)])
     assert not plot_scaling.figure(old).axes[0].containers[0].has_yerr
+
+
+def test_an_empty_panel_says_why_in_the_figure():
+    """One robot_scaling.py run of 1 and 2 robots at 3 humans: the panels against humans N stood empty, axes
+    from 0 to 1 humans and nothing said why but a line on the terminal; each now says it in the panel, and
+    the panels that have lines carry no such note."""
+    run = _report(3, [("cmpc", "fixed", 1, 100.0), ("cmpc", "fixed", 2, 100.0)])
+    fig = plot_scaling.figure(plot_scaling.points([("m.json", run)]))
+    axes = fig.axes  # row by row: robots, humans; robots, humans
+    note = "no two rows differ in humans N alone"
+    assert all(note in [t.get_text() for t in axes[k].texts] for k in (1, 3))
+    assert not any("no two rows" in t.get_text() for k in (0, 2) for t in axes[k].texts)
+    matplotlib.pyplot.close(fig)
