@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import re
 import textwrap
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Final
 
 from pipelines.experiments.tasks import Cell
@@ -33,6 +33,35 @@ def method_style(k: int) -> dict[str, str]:
         "ls": ("-", "--", ":")[k // 10 % 3],
         "marker": ("o", "^", "D")[k // 10 % 3],
     }
+
+
+# A column's marker by its team, where the columns of one method across teams share a colour (method_styles)
+_TEAM_MARKERS: Final[tuple[str, ...]] = ("o", "^", "D", "v", "P", "X")
+
+
+def method_styles(
+    methods: Sequence[str], method_robots: Mapping[str, int], by_robots: bool
+) -> dict[str, dict[str, str]]:
+    """Each column's look (``methods``: the labels plotted, in order), the colour of its line in the outcome
+    plots (report_plots._lines): the k-th method's, or ``by_robots`` (those plots against the number of
+    robots) that of the method its team's column belongs to, "CMPC robots=3" and "CMPC robots=6" both
+    CMPC's, with a marker per team. The safety plots coloured each column apart, so one sweep's figures gave
+    "orca robots=3" the orange that its outcome plots gave straight."""
+    teams = sorted({method_robots[m] for m in methods if m in method_robots})
+
+    def line(method: str) -> str:
+        if by_robots and method in method_robots:
+            return method.removesuffix(f" robots={method_robots[method]}")
+        return method
+
+    lines = list(dict.fromkeys(line(m) for m in methods))
+    styles = {}
+    for method in methods:
+        style = method_style(lines.index(line(method)))
+        if by_robots and method in method_robots:
+            style["marker"] = _TEAM_MARKERS[teams.index(method_robots[method]) % len(_TEAM_MARKERS)]
+        styles[method] = style
+    return styles
 
 
 # "d_min = 0.8, 1.0" of a --vary title: one item, never broken after its comma (the title read "d_min =

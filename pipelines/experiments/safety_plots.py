@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from crowdsim.metrics import COLLISION_DISTANCE
-from pipelines.experiments.plot_style import legend_width, method_style, settings_line, wrap_title
+from pipelines.experiments.plot_style import legend_width, method_styles, settings_line, wrap_title
 from pipelines.experiments.safety_report import (
     COLLISION_TARGET,
     CONTACT_DISTANCE,
@@ -124,9 +124,15 @@ def _by_humans(experiment: Experiment, summaries: Sequence[SafetyColumn]) -> dic
     return groups
 
 
-def _method_styles(experiment: Experiment) -> dict[str, dict[str, str]]:
-    """One style per method, the same in every panel and plot (plot_style.method_style)."""
-    return {label: method_style(k) for k, label in enumerate(experiment.method_labels)}
+def _method_styles(experiment: Experiment, summaries: Sequence[SafetyColumn]) -> dict[str, dict[str, str]]:
+    """One style per method, the same in every panel and plot and as the outcome plots colour it: by the
+    method a team's column belongs to where they go against the number of robots (plot_style.method_styles;
+    report_plots.plot_axis: one crowd size, several teams)."""
+    methods = [m for m in experiment.method_labels if any(s.cell.method == m for s in summaries)]
+    by_robots = (
+        len({s.cell.n_humans for s in summaries}) == 1 and len({s.cell.n_robots for s in summaries}) > 1
+    )
+    return method_styles(methods, experiment.method_robots, by_robots)
 
 
 # The histogram's outlines, by method: one on another hid it wholly where their counts agree.
@@ -139,7 +145,7 @@ def min_distance_hist_figure(experiment: Experiment, summaries: Sequence[SafetyC
     from matplotlib.ticker import MaxNLocator
 
     groups = _by_humans(experiment, summaries)
-    styles = _method_styles(experiment)
+    styles = _method_styles(experiment, summaries)
     order = {label: k for k, label in enumerate(experiment.method_labels)}
     contact = f"contact ({CONTACT_DISTANCE:g} m)"
     # The metric's threshold (crowdsim.metrics, Table I), not the planning d_min a column may vary.
@@ -280,7 +286,7 @@ def safety_tradeoff_figure(experiment: Experiment, summaries: Sequence[SafetyCol
     groups = {n: cells for n, cells in _by_humans(experiment, summaries).items() if len(cells) >= 2}
     if not groups:
         return None
-    styles = _method_styles(experiment)
+    styles = _method_styles(experiment, summaries)
     named = max(len(cells) for cells in groups.values()) > MAX_ANNOTATED
     target = f"{COLLISION_TARGET:g} % collisions: the paper's Table II stays below"
     legends = [

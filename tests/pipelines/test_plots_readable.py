@@ -309,3 +309,47 @@ def test_a_label_beside_a_corner_point_clears_a_shared_points_label():
     for box in boxes:
         assert frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1
     assert not boxes[0].overlaps(boxes[1])
+
+
+def test_a_method_keeps_its_colour_from_the_outcome_plots_to_the_safety_plots_across_teams():
+    """`sweep --experiment controllers --controllers orca,straight --humans 5 --vary scenario.robots=1,3`:
+    success_vs_robots.png drew orca blue and straight orange, a line each across the teams, but the
+    histogram and the trade-off coloured each column apart, "orca robots=3" orange. Each column now has its
+    method's colour there, its team told apart by line style (histogram) and marker (trade-off)."""
+    from matplotlib.colors import to_hex
+
+    from pipelines.commands.sweep_plan import configured_experiment
+    from pipelines.config import load
+
+    sets = [
+        "sweep.experiment=controllers",
+        'sweep.controllers=["orca", "straight"]',
+        'sweep.vary="scenario.robots=1,3"',
+    ]
+    experiment = configured_experiment(load(sets=sets))
+    cells = experiment.cells((5,))
+    records = [
+        _record(c, i, 0.5 + 0.1 * k, 27, success=True, collision=k == 1)
+        for k, c in enumerate(cells)
+        for i in range(4)
+    ]
+    summaries = summarize(experiment, cells, records)
+    outcome = outcome_figure(experiment, summaries, _outcome("success")).axes[0]
+    handles, labels = outcome.get_legend_handles_labels()
+    line_colour = {
+        label.removesuffix(" (ours)"): to_hex(h.lines[0].get_color())
+        for h, label in zip(handles, labels, strict=True)
+    }
+    assert sorted(line_colour) == ["orca", "straight"] and len(set(line_colour.values())) == 2
+    hist = min_distance_hist_figure(experiment, summaries).axes[0]
+    stairs = {p.get_label().rsplit(" (", 1)[0]: p for p in hist.patches}
+    trade = safety_tradeoff_figure(experiment, summaries)
+    assert trade is not None
+    for method in (c.method for c in cells):
+        base = method.split(" robots=")[0]
+        assert to_hex(stairs[method].get_edgecolor()) == line_colour[base], method
+    assert len({(p.get_edgecolor(), str(p.get_linestyle())) for p in stairs.values()}) == 4
+    markers = {
+        line.get_marker() for line in trade.axes[0].get_lines() if line.get_marker() not in ("None", "", None)
+    }
+    assert len(markers - {"_", "|"}) == 2  # a marker per team (the caps are "_" and "|")
