@@ -36,10 +36,14 @@ def max_steps(rec: Recording) -> int | None:
     env = rec.config().get("env")
     if not isinstance(env, dict):
         return _older_simulate_steps(rec)
+    fields = {k: env.get(k) for k in ("dt", "time_limit", "timeout_margin")}
+    # a recorder writes JSON numbers: a bool or a text is no setting, and an integer of 400 digits
+    # overflowed float() (OverflowError, a traceback where the review prints one line a file)
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in fields.values()):
+        return None
     try:
-        fields = {k: float(env[k]) for k in ("dt", "time_limit", "timeout_margin")}
-        return EnvConfig(**fields).max_steps  # type: ignore[arg-type]
-    except (KeyError, TypeError, ValueError, SimulationError):
+        return EnvConfig(**{k: float(v) for k, v in fields.items()}).max_steps  # type: ignore[arg-type]
+    except (OverflowError, TypeError, ValueError, SimulationError):
         return None
 
 

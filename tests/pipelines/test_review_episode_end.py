@@ -132,6 +132,11 @@ def _older(source: Path, out: Path, run: dict[str, str]) -> Path:
         messages = list(reader.iter_messages())
     metadata["crowdmpc"] = {**metadata["crowdmpc"], "format": "crowdmpc-episode/2"}
     metadata["config"], metadata["run"] = {}, {k: json.dumps(v) for k, v in run.items()}
+    return _write(out, metadata, messages)
+
+
+def _write(out: Path, metadata: dict[str, dict[str, str]], messages: list) -> Path:
+    """An MCAP file of these metadata records and ``messages`` (as make_reader's iter_messages gives them)."""
     with out.open("wb") as f:
         writer = Writer(f)
         writer.start(profile="", library="crowdmpc")
@@ -171,3 +176,27 @@ def test_an_older_simulates_recording_tells_its_time_limit(tmp_path, profile, ru
     assert "env" not in older.config() and older.episode()["dt"] == "0.4"
     summary = summarize(older)
     assert summary["metrics"]["timeout"] is True and summary["ended_by"] == ended
+
+
+@pytest.mark.parametrize(
+    "env",
+    [
+        '{"dt": 0.4, "time_limit": 1' + "0" * 400 + ', "timeout_margin": 1.0}',  # overflowed float()
+        '{"dt": true, "time_limit": 40.0, "timeout_margin": 1.0}',
+        '{"dt": "0.4", "time_limit": 40.0, "timeout_margin": 1.0}',
+    ],
+    ids=["huge", "bool", "text"],
+)
+def test_a_recorded_env_of_no_numbers_leaves_the_end_untold(tmp_path, capsys, env):
+    """A config whose env holds an integer float() cannot take ended the review in a traceback, and a bool or
+    a text, which no recorder writes, was read as a time step."""
+    path = _record(tmp_path / "runs", _stand, step_limit=5)
+    with path.open("rb") as f:
+        reader = make_reader(f)
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        messages = list(reader.iter_messages())
+    metadata["config"] = {**metadata["config"], "env": env}
+    edited = _write(tmp_path / "edited.mcap", metadata, messages)
+    assert summarize(read_recording(edited))["ended_by"] is None
+    assert main(["review", str(edited)]) == 0
+    assert "ended                                -" in capsys.readouterr().out
