@@ -105,6 +105,9 @@ def _metrics(x: Any) -> str | None:
             return f"{name!r} {problem}"
     if x.get("success") is True and "travel_time" in x and x["travel_time"] is None:
         return "a success without its travel time"
+    # what ended the episode is told from it (pipelines.logs.ending): -3 or true read as a loop's early stop
+    if "n_steps" in x and not (_is_int(x["n_steps"]) and x["n_steps"] >= 0):
+        return f"'n_steps' is {x['n_steps']!r}, expected a count of steps (an integer, 0 or more)"
     return None
 
 

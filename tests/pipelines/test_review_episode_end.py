@@ -3,6 +3,7 @@ so an episode that a contact (end_on_collision) or its own loop ended before the
 yes" as if the time limit had ended it."""
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import gymnasium as gym
@@ -200,3 +201,23 @@ def test_a_recorded_env_of_no_numbers_leaves_the_end_untold(tmp_path, capsys, en
     assert summarize(read_recording(edited))["ended_by"] is None
     assert main(["review", str(edited)]) == 0
     assert "ended                                -" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("n_steps", [-3, True, 5.0])
+def test_metrics_of_no_step_count_are_left_out_and_fail_the_check(tmp_path, capsys, n_steps):
+    """The metrics' n_steps, from which the review tells what ended the episode, was taken unchecked: -3 or
+    true read as a loop that stopped early, and --check called the file ok."""
+    path = _record(tmp_path / "runs", _stand, step_limit=5)
+    with path.open("rb") as f:
+        reader = make_reader(f)
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        messages = list(reader.iter_messages())
+    for i, (schema, channel, message) in enumerate(messages):
+        if channel.topic == "/episode/metrics":
+            record = json.loads(message.data)
+            record["metrics"]["n_steps"] = n_steps
+            messages[i] = (schema, channel, replace(message, data=json.dumps(record).encode()))
+    edited = _write(tmp_path / "edited.mcap", metadata, messages)
+    assert summarize(read_recording(edited))["ended_by"] is None
+    assert main(["review", str(edited), "--check"]) == 1
+    assert f"'metrics' 'n_steps' is {n_steps!r}, expected a count of steps" in capsys.readouterr().out
