@@ -67,8 +67,17 @@ def interrupt_behind(exc: BaseException | None) -> KeyboardInterrupt | None:
 def storage_refusal(exc: BaseException) -> str | None:
     """The one line that ends a command whose write the storage refused (``STORAGE_ERRNOS``): the file when
     the error names it, the cause, and what to do; None for any other error (a bug keeps its traceback)."""
-    if not isinstance(exc, OSError) or exc.errno not in STORAGE_ERRNOS:
+    if not isinstance(exc, OSError):
         return None
+    if exc.errno not in STORAGE_ERRNOS:
+        from predictors.durable import SyncFailed  # not at import: the predictors package loads casadi
+
+        if not isinstance(exc, SyncFailed):
+            return None
+        return (  # EIO at a file's sync: the storage itself failed
+            f"could not write {exc.filename} ({exc.strerror}: its data did not reach the disk); check the "
+            "disk or its mount (dmesg) and run the command again"
+        )
     # a copy's (shutil.move across file systems, as Lightning's checkpoint save does) names its source first,
     # and the file that could not be written second
     target = exc.filename2 if exc.filename2 is not None else exc.filename

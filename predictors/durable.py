@@ -8,10 +8,22 @@ it."""
 
 from __future__ import annotations
 
+import errno
 import os
 from pathlib import Path
 
 StrPath = str | os.PathLike[str]
+
+
+# fsync's answer on a file system that does not sync files (some FUSE and network ones): the data is written
+# as before the syncs were made, only its durability is left unsure, as a folder's is (sync_folder)
+_CANNOT_SYNC = frozenset({errno.EINVAL, errno.EOPNOTSUPP})
+
+
+class SyncFailed(OSError):
+    """A file's data the storage did not put on disk when synced (EIO; a full disk or a quota that NFS
+    reports only then): the write failed though every write() had returned. It names the file, which the
+    fsync's error does not, so that the CLI's line says which output was not written."""
 
 
 def sync_file(path: StrPath) -> None:
@@ -19,6 +31,9 @@ def sync_file(path: StrPath) -> None:
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)
+    except OSError as exc:
+        if exc.errno not in _CANNOT_SYNC:
+            raise SyncFailed(exc.errno, exc.strerror, os.fspath(path)) from None
     finally:
         os.close(fd)
 

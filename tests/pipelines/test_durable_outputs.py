@@ -188,3 +188,49 @@ def test_a_zoo_removes_renames(disk, tmp_path, monkeypatch, manifest_written):
         str(disk.events[hidden][1]).endswith(".removed") and disk.events[manifest][1].name == "manifest.json"
     )
     assert ("sync", folder) in disk.events[hidden + 1 : manifest], "the hiding renames were not synced"
+
+
+def _failing_fsync(monkeypatch, file_errno: int | None, folder_errno: int) -> None:
+    """fsync refused with ``folder_errno`` on a folder and ``file_errno`` (None: synced) on a file."""
+    import stat
+
+    fsync = os.fsync
+
+    def refused(fd: int) -> None:
+        code = folder_errno if stat.S_ISDIR(os.fstat(fd).st_mode) else file_errno
+        if code is not None:
+            raise OSError(code, os.strerror(code))
+        fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", refused)
+
+
+@pytest.mark.parametrize("errno_name", ["EINVAL", "EOPNOTSUPP"])
+def test_a_file_system_that_does_not_sync_still_gets_its_outputs(tmp_path, monkeypatch, errno_name):
+    """A file system whose fsync says EINVAL (some FUSE and network ones) failed every rename of an output in
+    a traceback since the syncs were added, though the data was written as before them."""
+    import errno
+
+    from pipelines.cli import main
+
+    _failing_fsync(monkeypatch, getattr(errno, errno_name), errno.EINVAL)
+    out = tmp_path / "prepared"
+    argv = ["data", "prepare", "--raw", str(write_tiny_ewap(tmp_path / "data")), "--out", str(out)]
+    assert main(argv) == 0
+    assert (out / "manifest.json").is_file()
+
+
+def test_a_files_data_the_disk_did_not_take_ends_in_one_line(tmp_path, monkeypatch, capsys):
+    """EIO when a file's data is synced is a write that failed: the command ends in one line naming the file,
+    where it ended in a traceback, and nothing is renamed under the output's name."""
+    import errno
+
+    from pipelines.cli import main
+
+    _failing_fsync(monkeypatch, errno.EIO, errno.EIO)
+    out = tmp_path / "prepared"
+    argv = ["data", "prepare", "--raw", str(write_tiny_ewap(tmp_path / "data")), "--out", str(out)]
+    assert main(argv) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()[-1:]
+    assert "could not write " in line and "(Input/output error: its data did not reach the disk)" in line
+    assert not (out / "manifest.json").exists()
