@@ -11,6 +11,14 @@ def short_repr(value: object, limit: int = 60) -> str:
     return text if len(text) <= limit else f"{text[: limit - 3]}..."
 
 
+def short_key(key: str, limit: int = 60) -> str:
+    """A JSON key of a user's file as a one-line error names it: cut as ``short_repr`` cuts, and written with
+    ASCII escapes, so that a key spelt with a look-alike letter (a Cyrillic 'е' in 'seed') or a combining
+    mark does not read as the key the same line lists as allowed."""
+    text = ascii(key)
+    return text if len(text) <= limit else f"{text[: limit - 3]}..."
+
+
 class PredictorError(ValueError):
     """Base class of the user-facing errors raised by `predictors`."""
 

@@ -19,7 +19,7 @@ from typing import Any
 
 from predictors.checkpoint import CONFIG_FORMAT, CONFIG_KEYS, CheckedPair, parse_document, read_checkpoint
 from predictors.durable import replace_durably
-from predictors.errors import PredictorError
+from predictors.errors import PredictorError, short_key
 from predictors.hashing import sha256_file
 from predictors.manifest import (
     MANIFEST_NAME,
@@ -131,7 +131,7 @@ def _new_entry(
     unknown = sorted(set(document) - CONFIG_KEYS)
     if unknown:
         raise PredictorError(
-            f"{config}: unknown key {unknown[0]!r}; a predictor config holds {sorted(CONFIG_KEYS)}"
+            f"{config}: unknown key {short_key(unknown[0])}; a predictor config holds {sorted(CONFIG_KEYS)}"
         )
     document["name"] = name
     config_bytes = (json.dumps(document, indent=2) + "\n").encode()

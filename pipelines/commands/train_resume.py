@@ -14,7 +14,7 @@ from typing import Any, Final
 
 from pipelines.errors import PipelineError
 from predictors.checkpoint import check_name, load_tensors
-from predictors.errors import PredictorError
+from predictors.errors import PredictorError, short_key
 
 # What fixes a training run: --resume continues it with these, and only --epochs may change.
 SETTINGS_FILE = "train_settings.json"
@@ -119,8 +119,8 @@ def read_run_settings(out: Path) -> dict[str, Any] | None:
     unknown = [key for key in recorded if key not in SETTINGS_KEYS]
     if unknown:
         raise PipelineError(
-            f"--resume: {path} holds the key {unknown[0]!r}, which crowdmpc train never writes (edited?); "
-            f"the file holds only {', '.join(SETTINGS_KEYS)}"
+            f"--resume: {path} holds the key {short_key(unknown[0])}, which crowdmpc train never writes "
+            f"(edited?); the file holds only {', '.join(SETTINGS_KEYS)}"
         )
     return recorded
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from pipelines.cli import main
+from pipelines.errors import PipelineError
 from predictors.registry import available, load_predictor
 from predictors.zoo import user_zoo_dir
 from tests.predictors.samples import walk_scene_records, write_lines, write_walk_file
@@ -1317,3 +1318,20 @@ def test_a_resume_refuses_a_key_its_settings_file_never_held(trained, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{path} holds the key 'sed', which crowdmpc train never writes" in err
     assert "the file holds only name, model, " in err and "seed: checkpoint" not in err
+
+
+@pytest.mark.parametrize(
+    ("key", "shown"),
+    [("s\u0435ed", "'s\\u0435ed'"), ("x" * 1_000_000, "'" + "x" * 56 + "...")],
+    ids=["look-alike", "long"],
+)
+def test_a_settings_key_is_named_as_it_is_spelt_and_short(tmp_path, key, shown):
+    """A key spelt with a Cyrillic 'е' was named 'sеed', the very name the line listed as one the file may
+    hold, and a key of a million characters made the one-line refusal a megabyte long."""
+    from pipelines.commands.train_resume import read_run_settings
+
+    (tmp_path / "train_settings.json").write_text(json.dumps({"seed": 0, key: 1}))
+    with pytest.raises(PipelineError) as refused:
+        read_run_settings(tmp_path)
+    assert f"holds the key {shown}, which crowdmpc train never writes" in str(refused.value)
+    assert len(str(refused.value)) < 1000

@@ -618,8 +618,18 @@ def test_zoo_add_names_a_metrics_path_that_is_no_file_as_such(tmp_path, zoo_dir,
     assert tree(zoo_dir) == before
 
 
-@pytest.mark.parametrize("key", ["obs_lenn", "Net"])
-def test_zoo_add_refuses_a_config_key_train_never_writes(tmp_path, zoo_dir, pair, capsys, key):
+@pytest.mark.parametrize(
+    ("key", "shown"),
+    [
+        ("obs_lenn", "'obs_lenn'"),
+        ("Net", "'Net'"),
+        # a Cyrillic 'о' read 'obs_len' beside the same name listed as allowed; a long key flooded the line
+        ("\u043ebs_len", "'\\u043ebs_len'"),
+        ("k" * 100_000, "'" + "k" * 56 + "..."),
+    ],
+    ids=["misspelt", "case", "look-alike", "long"],
+)
+def test_zoo_add_refuses_a_config_key_train_never_writes(tmp_path, zoo_dir, pair, capsys, key, shown):
     """A misspelt key ("obs_lenn": 8) was added and ignored, so the entry ran as if it were absent."""
     document = json.loads(pair[1].read_text())
     pair[1].write_text(json.dumps({**document, key: 8}))
@@ -627,7 +637,7 @@ def test_zoo_add_refuses_a_config_key_train_never_writes(tmp_path, zoo_dir, pair
     code, line = cli(["zoo", "add", str(pair[0])], capsys)
     assert (code, line) == (
         2,
-        f"crowdmpc zoo add: error: {pair[1]}: unknown key {key!r}; a predictor config holds "
+        f"crowdmpc zoo add: error: {pair[1]}: unknown key {shown}; a predictor config holds "
         "['class', 'format', 'model', 'name', 'net', 'obs_len', 'training']",
     )
     assert tree(tmp_path) == before
