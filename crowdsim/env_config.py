@@ -23,7 +23,7 @@ from crowdsim.conventions import (
     Crossing,
     SuccessRule,
 )
-from crowdsim.errors import SimulationError, real_number
+from crowdsim.errors import SimulationError, got, real_number
 from crowdsim.orca import OrcaParams
 from crowdsim.replay import CROWDS, RECORDED_DT
 from crowdsim.scenarios import FORMATIONS, Formation, check_spacing
@@ -115,7 +115,8 @@ class EnvConfig:
         )
         if separation > MAX_SPAWN_SEPARATION:
             raise SimulationError(
-                f"EnvConfig.spawn_separation must be at most {MAX_SPAWN_SEPARATION:g} m, got {separation:g}"
+                f"EnvConfig.spawn_separation must be at most {MAX_SPAWN_SEPARATION:g} m, "
+                f"got {got(separation)}"
             )
         if self.crossing not in CROSSINGS:
             raise SimulationError(
@@ -176,16 +177,16 @@ class EnvConfig:
         for name, (most, unit) in ENV_BOUNDS.items():
             if getattr(self, name) > most:
                 raise SimulationError(
-                    f"EnvConfig.{name} must be at most {most:g} {unit}, got {getattr(self, name):g}"
+                    f"EnvConfig.{name} must be at most {most:g} {unit}, got {got(getattr(self, name))}"
                 )
 
     def _check_dt(self) -> None:
         """A step within the episode (``dt <= time_limit``), and not so short that ``max_steps`` overflows."""
         if self.dt < MIN_DT:
-            raise SimulationError(f"EnvConfig.dt must be at least {MIN_DT:g} s, got {self.dt:g}")
+            raise SimulationError(f"EnvConfig.dt must be at least {MIN_DT:g} s, got {got(self.dt)}")
         if self.dt > self.time_limit:
             raise SimulationError(
-                f"EnvConfig.dt must be at most time_limit = {self.time_limit:g} s, got {self.dt:g}"
+                f"EnvConfig.dt must be at most time_limit = {self.time_limit:g} s, got {got(self.dt)}"
             )
 
     def _check_margins(self) -> None:

@@ -13,6 +13,13 @@ class SimulationError(ValueError):
     """Base class of the user-facing errors raised by `crowdsim`."""
 
 
+def got(value: float) -> str:
+    """A refused number as its refusal names it: ``:g`` where that reads back as the value, else in full, so
+    that a value just past a bound is not rounded onto it ('must be at most 10 m, got 10' of 10.000001)."""
+    text = f"{value:g}"
+    return text if float(text) == value else repr(float(value))
+
+
 class LayoutWarning(UserWarning):
     """A layout the simulator runs but that starts agents in contact (``CrowdEnv.reset_layout``)."""
 

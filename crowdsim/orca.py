@@ -38,7 +38,7 @@ from typing import Final
 
 import numpy as np
 
-from crowdsim.errors import SimulationError, real_number, whole_number
+from crowdsim.errors import SimulationError, got, real_number, whole_number
 from crowdsim.world import MIN_DT, MOST_COORDINATE
 
 RVO_EPSILON: Final[float] = 1e-5  # RVO2's Definitions.h: tolerance for (almost) parallel lines
@@ -228,7 +228,7 @@ def _check_magnitudes(
         if beyond.any():
             raise SimulationError(
                 f"orca_velocities: every {name} component must be finite and within ±{most:g} {unit}, got "
-                f"{float(values[beyond][0]):g}"
+                f"{got(float(values[beyond][0]))}"
             )
 
 

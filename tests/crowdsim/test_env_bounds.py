@@ -44,6 +44,15 @@ def test_the_profiles_are_within_the_bounds(profile, visibility):
         ({"spawn_separation": 1e308}, "EnvConfig.spawn_separation must be at most 100 m, got 1e+308"),
         ({"orca_radius_margin": float("inf")}, "EnvConfig.orca_radius_margin must be in [0, 10] m, got inf"),
         ({"orca_radius_margin": 11.0}, "EnvConfig.orca_radius_margin must be in [0, 10] m, got 11.0"),
+        # just past a bound: ':g' rounded each onto it ('must be at most 10 m, got 10')
+        ({"radius": 10.000001}, "EnvConfig.radius must be at most 10 m, got 10.000001"),
+        ({"time_limit": 86400.0001}, "EnvConfig.time_limit must be at most 86400 s, got 86400.0001"),
+        ({"dt": 9.999999e-7}, "EnvConfig.dt must be at least 1e-06 s, got 9.999999e-07"),
+        ({"dt": 40.0000001}, "EnvConfig.dt must be at most time_limit = 40 s, got 40.0000001"),
+        (
+            {"spawn_separation": 100.000001},
+            "EnvConfig.spawn_separation must be at most 100 m, got 100.000001",
+        ),
     ],
 )
 def test_values_beyond_the_bounds_are_refused_in_one_compact_line(settings, message):

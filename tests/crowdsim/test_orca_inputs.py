@@ -72,6 +72,7 @@ def test_a_step_shorter_than_the_least_is_refused(dt, shown):
     "radii, speeds, message",
     [
         (1e300, 1.0, "radii component must be finite and within ±1e+09 m, got 1e+300"),
+        (1.0000001e9, 1.0, "radii component must be finite and within ±1e+09 m, got 1000000100.0"),
         (np.array([0.3, np.nan]), 1.0, "radii component must be finite and within ±1e+09 m, got nan"),
         (
             0.3,
