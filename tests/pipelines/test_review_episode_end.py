@@ -10,7 +10,6 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from mcap.reader import make_reader
-from mcap.writer import Writer
 
 import crowdsim  # noqa: F401  (registers the environment)
 from crowdsim.gym_env import POSITION, PRESENT
@@ -20,6 +19,7 @@ from pipelines.logs.reader import read_recording
 from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.logs.review import format_summary, summarize
 from pipelines.loop.gym_loop import ObserveEpisodes
+from tests.pipelines.mcap_files import write_mcap
 
 
 def _record(
@@ -137,25 +137,8 @@ def _older(source: Path, out: Path, run: dict[str, str]) -> Path:
 
 
 def _write(out: Path, metadata: dict[str, dict[str, str]], messages: list) -> Path:
-    """An MCAP file of these metadata records and ``messages`` (as make_reader's iter_messages gives them)."""
-    with out.open("wb") as f:
-        writer = Writer(f)
-        writer.start(profile="", library="crowdmpc")
-        for name, values in metadata.items():
-            writer.add_metadata(name, values)
-        schemas: dict[int, int] = {}
-        channels: dict[int, int] = {}
-        for schema, channel, message in messages:
-            if schema is not None and schema.id not in schemas:
-                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
-            if channel.id not in channels:
-                schema_id = schemas[schema.id] if schema is not None else 0
-                channels[channel.id] = writer.register_channel(
-                    channel.topic, channel.message_encoding, schema_id
-                )
-            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time)
-        writer.finish()
-    return out
+    """An MCAP file of these metadata records and ``messages``, its header crowdmpc's."""
+    return write_mcap(out, metadata, messages, library="crowdmpc")
 
 
 @pytest.mark.parametrize(

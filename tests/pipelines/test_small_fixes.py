@@ -11,7 +11,6 @@ from pathlib import Path
 
 import pytest
 from mcap.reader import make_reader
-from mcap.writer import Writer
 
 from pipelines import commands
 from pipelines.cli import main
@@ -24,6 +23,7 @@ from pipelines.logs.reader import read_recording
 from pipelines.logs.review import summarize
 from pipelines.logs.schema_check import check_recording
 from tests.pipelines.mcap_episode import record_episode
+from tests.pipelines.mcap_files import write_mcap
 
 ROOT = Path(__file__).resolve().parents[2]
 NS = 1_000_000_000
@@ -223,25 +223,7 @@ def _rewritten(source: Path, out: Path, episode_metadata: dict[str, str] | None,
         messages = list(reader.iter_messages())
     if episode_metadata is not None:
         metadata["episode"] = episode_metadata
-    with out.open("wb") as f:
-        writer = Writer(f)
-        writer.start()
-        for name, values in metadata.items():
-            writer.add_metadata(name, values)
-        schemas: dict[int, int] = {}
-        channels: dict[int, int] = {}
-        for schema, channel, message in messages:
-            if schema is not None and schema.id not in schemas:
-                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
-            if channel.id not in channels:
-                schema_id = schemas[schema.id] if schema is not None else 0
-                channels[channel.id] = writer.register_channel(
-                    channel.topic, channel.message_encoding, schema_id
-                )
-            t = message.log_time - shift_ns
-            writer.add_message(channels[channel.id], log_time=t, data=message.data, publish_time=t)
-        writer.finish()
-    return out
+    return write_mcap(out, metadata, messages, shift_ns=shift_ns)
 
 
 def test_files_with_log_times_from_zero_still_read_and_review(episode, tmp_path, capsys):
