@@ -264,30 +264,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _simulate(resolved: SimulateRun) -> int:
+    from pipelines.commands.simulate_notes import noted_reads
     from pipelines.loop.episode import run_episodes
 
     cfg, spec = resolved.config, resolved.spec
     scenario, sim = cfg.scenario, cfg.simulate
-    from pipelines.commands import simulate_checks as checks
-    from pipelines.commands import team_notes
-    from pipelines.commands.calibration_notes import calibration_notes
-    from pipelines.commands.simulate_reads import read_once
-
-    formation, spacing = cfg.env.formation, cfg.env.robot_spacing
-    entry, read = read_once(resolved.read, spec, cfg)  # for the notes and the controller
-    notes = (
-        team_notes.separate_goals_note(spec, scenario.robots, formation, spacing),
-        team_notes.flock_note(spec, scenario.robots, formation, spacing),
-        team_notes.goal_room_note(spec, scenario.robots, formation, spacing),
-        team_notes.radius_note(spec, scenario.robots, cfg.env.radius, formation, spacing),
-        checks.horizon_note(spec, entry),
-        checks.size_note(spec, scenario.humans, scenario.robots),
-        checks.tolerance_note(spec),
-        *checks.zoo_notes(spec.predictor_name, entry),
-        *calibration_notes(spec, cfg, read.calibration),
-    )
-    for note in filter(None, notes):
-        print(note, file=sys.stderr)
+    read = noted_reads(cfg, spec, resolved.read)
     env_config = cfg.env
     run_meta = _run_meta(resolved)
     recorder = None
