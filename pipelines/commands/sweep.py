@@ -341,7 +341,7 @@ def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
     out = without_missing_parents(Path(settings.out or ""))
     if not args.dry_run:
         check_writable(out, cfg.label("sweep", "out"), directory=True)
-        check_sweep_directory(out, cfg.label("sweep", "out"))
+    check_sweep_directory(out, cfg.label("sweep", "out"))  # reads only: a dry run planned into others' files
     check_world(cfg)
     if not args.report_only:  # a report starts no worker
         check_mpc_solvable(cfg, (out, args.reuse))  # not of a report: a folder that ran beyond one reads back

@@ -46,3 +46,17 @@ def test_a_dry_run_into_a_new_folder_lists_the_cells_alone(tmp_path, capsys):
     )
     assert code == 0 and "recorded" not in stdout
     assert [len(line.split()) for line in stdout.splitlines()[1:]] == [4, 4]  # label, crowd size, key
+
+
+def test_a_dry_run_into_a_folder_of_other_files_is_refused_as_the_run_is(tmp_path, capsys):
+    """The dry run skipped the folder check its run makes, so it printed a plan for a folder of other files
+    (a sweep's tables would overwrite them), which the run then refused."""
+    out = tmp_path / "theirs"
+    out.mkdir()
+    (out / "foo").write_text("not a sweep's\n")
+    argv = [*ARGV, "--humans", "3", "--episodes-per-cell", "1", "--out", str(out)]
+    code, stdout, stderr = run_cli(capsys, *argv, "--dry-run")
+    assert code == 2 and stdout == ""
+    assert f"{out} holds files but no sweep" in stderr and len(stderr.strip().splitlines()) == 1
+    assert run_cli(capsys, *argv)[2] == stderr  # the run's refusal, word for word
+    assert [p.name for p in out.iterdir()] == ["foo"]
