@@ -5,6 +5,7 @@ import shutil
 
 import matplotlib
 import pytest
+from matplotlib.colors import same_color as same_colour
 
 from tests.benchmark_modules import load_benchmark
 
@@ -161,4 +162,24 @@ def test_an_empty_panel_says_why_in_the_figure():
     note = "no two rows differ in humans N alone"
     assert all(note in [t.get_text() for t in axes[k].texts] for k in (1, 3))
     assert not any("no two rows" in t.get_text() for k in (0, 2) for t in axes[k].texts)
+    matplotlib.pyplot.close(fig)
+
+
+def test_two_controllers_with_the_same_success_both_show():
+    """One run of CMPC and DMPC at 1 and 2 robots, both 100 % successful: DMPC's success line and markers
+    lay exactly on CMPC's, same width, and only the orange one showed. The line drawn above is now the
+    narrower, with smaller markers, so the one below shows round it, at the values it had."""
+    run = _report(3, [(c, "fixed", m, 100.0) for c in ("cmpc", "dmpc") for m in (1, 2)])
+    fig = plot_scaling.figure(plot_scaling.points([("m.json", run)]))
+    for ax in fig.axes[0], fig.axes[2]:  # success and collision; step times
+        lines = [line for line in ax.get_lines() if len(line.get_xdata()) == 2]  # not the 0.4 s line
+        below = [line for line in lines if same_colour(line.get_color(), "tab:blue")]  # CMPC's
+        above = [line for line in lines if same_colour(line.get_color(), "tab:orange")]  # DMPC's
+        assert below and len(below) == len(above)
+        for low, high in zip(below, above, strict=True):
+            assert high.get_zorder() > low.get_zorder()
+            assert high.get_linewidth() < low.get_linewidth()
+            assert high.get_markersize() < low.get_markersize()
+    (cmpc, dmpc) = (bars.lines[0] for bars in fig.axes[0].containers)
+    assert list(cmpc.get_ydata()) == list(dmpc.get_ydata()) == [100.0, 100.0]
     matplotlib.pyplot.close(fig)
