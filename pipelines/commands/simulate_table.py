@@ -199,21 +199,27 @@ def _cut_short_rows(summary: dict[str, Any], time_limit_s: float | None) -> list
     return found
 
 
-def plot_title(controller: str, episode: EpisodeResult, crowd: str = "orca") -> str:
+def plot_title(controller: str, episode: EpisodeResult, env_config: EnvConfig) -> str:
     """What the --plot figure shows: who drove (with its predictor), the crowd, the seed; then how it ended
     and how close a robot came to a human, with the collision or contact the metrics counted, and two robots
-    touching each other, at their closest (between steps where the record has it). ``crowd``: the
+    touching each other, at their closest (between steps where the record has it). The crowd is the
     simulator's (EnvConfig.crowd), named when replayed, which a title of the scenario alone hid. The title
     once named neither predictor nor crowd, called a run through a human a "success" with nothing more,
-    and gave "min robot-human distance inf m" for an episode without humans."""
+    gave "min robot-human distance inf m" for an episode without humans, and said "timeout" without when
+    (pipelines.logs.ending.outcome_text, as review's titles say it)."""
+    from pipelines.logs.ending import SUCCESS, TIME_LIMIT, outcome_text
+
     m = episode.metrics
     who = controller + (f" with {episode.predictor}" if episode.predictor else "")
     seed = "" if episode.seed is None else f", seed {episode.seed}"
     robots = f"{episode.n_robots} robot" + ("s" if episode.n_robots != 1 else "")
     humans = f"{episode.n_humans} human" + ("s" if episode.n_humans != 1 else "")
-    replayed = "" if crowd == "orca" else f", crowd {crowd}"
+    replayed = "" if env_config.crowd == "orca" else f", crowd {env_config.crowd}"
     crowd = f"{episode.scenario}, {robots}, {humans}{replayed}{seed}"
-    outcome = f"success in {m.travel_time:g} s" if m.success else "timeout"
+    steps = len(episode.robot_positions) - 1
+    # simulate's episodes end at success or at the time limit; a shorter one was stopped by its loop
+    end = SUCCESS if m.success else (TIME_LIMIT if steps >= env_config.max_steps else None)
+    outcome = outcome_text(end, steps * env_config.dt, env_config.time_limit, m.travel_time)
     if episode.n_humans == 0:
         closest = "no humans"
     else:
@@ -256,7 +262,7 @@ def first_episode_figure(
         first.robot_positions,
         first.human_positions,
         first.robot_goals,
-        title=plot_title(controller, first, env_config.crowd),
+        title=plot_title(controller, first, env_config),
         radius=env_config.radius,
         dt=env_config.dt,
         human_present=first.human_present,

@@ -153,3 +153,36 @@ def metric_shown(name: str, value: Any, end: str | None) -> Any:
     if name == "timeout" and value is True and end in (CONTACT, CUT_SHORT):
         return "yes (the metric: not success; the time limit did not end it)"
     return value
+
+
+def outcome_text(end: str | None, end_s: float, limit_s: float | None, travel_s: float | None = None) -> str:
+    """How an episode ended, as simulate's and review's figure titles say it: "success in 12.2 s", "timeout
+    at 5.2 s (time limit 6 s)". A title once said "timeout" alone: not after how long, nor that the paper's
+    profile starts no step within timeout_margin of the limit, so a 6 s limit ends its run at 5.2 s."""
+    at = f"at {end_s:g} s"
+    limit = "" if limit_s is None else f" (time limit {limit_s:g} s)"
+    if end == SUCCESS:
+        return f"success in {end_s if travel_s is None else travel_s:g} s"
+    if end == TIME_LIMIT:
+        return f"timeout {at}{limit}"
+    if end == CONTACT:
+        return f"robot-human contact {at}{limit}"
+    if end == CUT_SHORT:
+        return f"stopped {at} by its loop{limit}"
+    return f"no success, ended {at}{limit}"  # what ended it is not recorded
+
+
+def recording_outcome(rec: Recording) -> str | None:
+    """``outcome_text`` of a recorded episode, None where the file holds no end (a killed run's)."""
+    metrics_messages = rec.data("/episode/metrics")
+    robots = rec.data("/robots")
+    if not metrics_messages or not robots:
+        return None
+    metrics = metrics_messages[-1]["metrics"]
+    env = rec.config().get("env")
+    limit = env.get("time_limit") if isinstance(env, dict) else None
+    if not isinstance(limit, (int, float)) or isinstance(limit, bool):
+        limit = None
+    travel = metrics.get("travel_time") if isinstance(metrics, dict) else None
+    travel = float(travel) if isinstance(travel, (int, float)) and not isinstance(travel, bool) else None
+    return outcome_text(ended_by(rec, metrics), float(robots[-1]["time"]), limit, travel)

@@ -104,12 +104,21 @@ def _recording_figure(
     # promised them all the same.
     shown = [what for what, has in (("plans", view.plans), ("predictions", _has_predictions(view))) if has]
     ax.set_title(
-        f"{rec.label}\n{' and '.join(shown) or 'agents'} at t = {', '.join(f'{t:g}' for t in drawn)} s"
+        f"{titled(rec)}\n{' and '.join(shown) or 'agents'} at t = {', '.join(f'{t:g}' for t in drawn)} s"
     )
     if rec.truncated:
         ax.text(0.01, 0.01, "TRUNCATED FILE", transform=ax.transAxes, color="red", fontsize=9)
     _dedupe_legend(ax)
     return fig, drawn
+
+
+def titled(rec: Recording) -> str:
+    """The recording's label and, where the file holds its end, how it ended as simulate's title says it
+    (review's figures once named neither: a timeout read as any run)."""
+    from pipelines.logs.ending import recording_outcome
+
+    outcome = recording_outcome(rec)
+    return rec.label if outcome is None else f"{rec.label}: {outcome}"
 
 
 def _has_predictions(view: EpisodeView) -> bool:
@@ -292,7 +301,7 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
     fig = Figure(figsize=(6, 6.5), layout="constrained")
     ax = fig.add_subplot()
     frame_axes(ax, view.robot_positions, view.human_positions, view.robot_goals)
-    ax.set_title(rec.label, fontsize=9)
+    ax.set_title(titled(rec), fontsize=9)
     ax.plot(*view.robot_goals.T, "*", color=GOAL_COLOR, mec="k", mew=0.5, ms=14, zorder=1)
     robots = [Circle((0, 0), view.radius, fc=_robot_color(i), ec="k", lw=0.5, zorder=3) for i in range(m)]
     humans = [Circle((0, 0), view.radius, fill=False, ec=HUMAN_COLOR, lw=1.2, zorder=3) for _ in range(n)]

@@ -312,6 +312,6 @@ def test_the_figures_of_a_replayed_run_name_its_crowd(data, tmp_path, capsys, mo
         )
     (replayed, replayed_review), (orca, orca_review) = titles
     assert replayed.startswith("orca, circle, 3 robots, 2 humans, crowd eth_test, seed 0\n")
-    assert replayed_review.startswith("orca / circle / crowd eth_test / seed 0\n")
+    assert replayed_review.startswith("orca / circle / crowd eth_test / seed 0: success in ")
     assert orca.startswith("orca, circle, 3 robots, 2 humans, seed 0\n")
-    assert orca_review.startswith("orca / circle / seed 0\n")
+    assert orca_review.startswith("orca / circle / seed 0: success in ")
