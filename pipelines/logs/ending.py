@@ -186,3 +186,10 @@ def recording_outcome(rec: Recording) -> str | None:
     travel = metrics.get("travel_time") if isinstance(metrics, dict) else None
     travel = float(travel) if isinstance(travel, (int, float)) and not isinstance(travel, bool) else None
     return outcome_text(ended_by(rec, metrics), float(robots[-1]["time"]), limit, travel)
+
+
+def titled(rec: Recording) -> str:
+    """The recording's label and, where the file holds its end, how it ended as simulate's title says it
+    (review's figures once named neither: a timeout read as any run)."""
+    outcome = recording_outcome(rec)
+    return rec.label if outcome is None else f"{rec.label}: {outcome}"

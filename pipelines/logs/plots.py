@@ -15,6 +15,7 @@ from typing import Any, Final
 import numpy as np
 
 from pipelines.errors import PipelineError
+from pipelines.logs.ending import titled
 from pipelines.logs.identity import differing_settings, shown
 from pipelines.logs.reader import Recording
 from pipelines.logs.view import EpisodeView, episode_view
@@ -110,15 +111,6 @@ def _recording_figure(
         ax.text(0.01, 0.01, "TRUNCATED FILE", transform=ax.transAxes, color="red", fontsize=9)
     _dedupe_legend(ax)
     return fig, drawn
-
-
-def titled(rec: Recording) -> str:
-    """The recording's label and, where the file holds its end, how it ended as simulate's title says it
-    (review's figures once named neither: a timeout read as any run)."""
-    from pipelines.logs.ending import recording_outcome
-
-    outcome = recording_outcome(rec)
-    return rec.label if outcome is None else f"{rec.label}: {outcome}"
 
 
 def _has_predictions(view: EpisodeView) -> bool:
@@ -255,10 +247,11 @@ def check_animation_path(out: str | Path, option: str = "--animate") -> None:
         raise PipelineError("an .mp4 needs ffmpeg, which is not installed here; ask for a .gif instead")
 
 
-def _animation_legend(fig: Any, view: EpisodeView, sensor: float | None = None) -> None:
+def _animation_legend(fig: Any, view: EpisodeView, sensor: float | None = None) -> dict[str, list[Any]]:
     """What each mark is, under the axes (nothing drawn is hidden): robots in their own colours (robot 0's
     stands for all), humans, goals, the paths so far, plans and predictions when the file has them, and the
-    range of the sensor the controller was behind."""
+    range of the sensor the controller was behind. Returns the handle and text of each entry by label, so
+    that a frame shows only those of what it draws (``_show_drawn``)."""
     from matplotlib.lines import Line2D
 
     robot = _robot_color(0)
@@ -279,7 +272,23 @@ def _animation_legend(fig: Any, view: EpisodeView, sensor: float | None = None) 
         entries.append(
             Line2D([], [], ls="--", color=robot, lw=0.8, alpha=0.5, label=f"sensor range ({sensor:g} m)")
         )
-    fig.legend(handles=entries, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
+    legend = fig.legend(handles=entries, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
+    return {t.get_text(): [h, t] for h, t in zip(legend.legend_handles, legend.get_texts(), strict=True)}
+
+
+def _show_drawn(entries: dict[str, list[Any]], drawn: dict[str, bool]) -> list[Any]:
+    """Hides the legend entries of marks that a frame does not draw (frame 0 listed a "robot path" before
+    any path was drawn); hidden, not removed, so the legend keeps its place from frame to frame."""
+    for label, visible in drawn.items():
+        for artist in entries.get(label, ()):
+            artist.set_visible(visible)
+    return [artist for label in drawn for artist in entries.get(label, ())]
+
+
+def _leaves(start: np.ndarray, points: np.ndarray) -> bool:
+    """Whether a line from ``start`` through ``points`` (m, broadcast together) strays over a millimetre."""
+    # under a pixel here, where a standing crowd's first prediction strays 5e-7 m; NaN compares False
+    return bool(np.any(np.abs(points - start) > 1e-3))
 
 
 def clock_decimals(dt: float) -> int:
@@ -314,7 +323,7 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
     predictions = [ax.plot([], [], ":", color=HUMAN_COLOR, lw=1.0)[0] for _ in range(n)]
     clock = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=9)
     decimals = clock_decimals(view.dt)
-    _animation_legend(fig, view, sensor)
+    entries = _animation_legend(fig, view, sensor)
 
     def draw(row: int) -> list[Any]:
         step = int(view.steps[row])
@@ -342,7 +351,13 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
         clock.set_text(
             f"t = {view.times[row]:.{decimals}f} s" + ("   (truncated file)" if rec.truncated else "")
         )
-        return [*robots, *ranges, *humans, *trails, *plans, *predictions, clock]
+        drawn = {  # a line of some length: a constant-velocity prediction of a standing crowd is none
+            "robot path": _leaves(view.robot_positions[0][None], view.robot_positions[: row + 1]),
+            "robot plan": plan is not None and _leaves(view.robot_positions[row][:, None], plan),
+            "predicted human path": prediction is not None
+            and _leaves(view.human_positions[row][None], prediction),
+        }
+        return [*robots, *ranges, *humans, *trails, *plans, *predictions, *_show_drawn(entries, drawn), clock]
 
     return fig, draw, view
 

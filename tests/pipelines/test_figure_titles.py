@@ -45,3 +45,45 @@ def test_a_timeouts_titles_say_when_and_at_which_limit(timed_out):
                                                         "t = 0, 1.2, 2.4, 4, 5.2 s"]  # fmt: skip
     animated, _, _ = animation_figure(rec)
     assert animated.axes[0].get_title() == f"straight / circle / seed 0: {said}"
+
+
+def test_an_animation_frame_lists_only_what_it_draws(timed_out):
+    """review --animate's frame 0 listed "robot path" under the axes before any path was drawn. A frame now
+    shows the entry of the paths, plans and predictions only where it draws them, hiding (not removing) the
+    others so that the legend keeps its place."""
+    from pipelines.logs.plots import animation_figure
+    from pipelines.logs.reader import read_recording
+
+    fig, draw, view = animation_figure(read_recording(timed_out[1]))
+    (legend,) = fig.legends
+
+    def shown(row: int) -> dict[str, bool]:
+        draw(row)
+        return {
+            t.get_text(): t.get_visible() and h.get_visible()
+            for h, t in zip(legend.legend_handles, legend.get_texts(), strict=True)
+        }
+
+    assert shown(0) == {"robot": True, "human": True, "robot goal": True, "robot path": False}
+    assert shown(1)["robot path"] and shown(len(view.times) - 1)["robot path"]
+    assert not shown(0)["robot path"]  # back at the start: hidden again
+
+
+def test_the_last_frame_of_a_planned_run_lists_no_plan(tmp_path):
+    """The state after a run's last step has no plan and no prediction recorded: its frame drew neither and
+    listed both; nor did frame 0 draw a prediction of a crowd standing still, which it listed."""
+    from pipelines.logs.plots import animation_figure
+    from pipelines.logs.reader import read_recording
+    from tests.pipelines.mcap_episode import record_episode
+
+    fig, draw, view = animation_figure(read_recording(record_episode(tmp_path, steps=3).path))
+    (legend,) = fig.legends
+    planned = ("robot plan", "predicted human path")
+    assert set(planned) <= {t.get_text() for t in legend.get_texts()}
+    # at t = 0 the constant-velocity prediction of people standing still strays 5e-7 m: drawn as a point
+    rows = {0: (True, False), 1: (True, True), len(view.times) - 1: (False, False)}
+    for row, expected in rows.items():
+        draw(row)
+        shown = {t.get_text(): t.get_visible() and h.get_visible() for h, t in zip(legend.legend_handles,
+                 legend.get_texts(), strict=True)}  # fmt: skip
+        assert (shown["robot plan"], shown["predicted human path"]) == expected, row
