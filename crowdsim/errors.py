@@ -8,6 +8,8 @@ from __future__ import annotations
 import numbers
 from collections.abc import Callable
 
+import numpy as np
+
 
 class SimulationError(ValueError):
     """Base class of the user-facing errors raised by `crowdsim`."""
@@ -18,6 +20,15 @@ def got(value: float) -> str:
     that a value just past a bound is not rounded onto it ('must be at most 10 m, got 10' of 10.000001)."""
     text = f"{value:g}"
     return text if float(text) == value else repr(float(value))
+
+
+def refuse_bools(where: str, **values: object) -> None:
+    """SimulationError for a bool given as a length, a speed or a step: Python takes True for 1, so
+    ``orca_velocities(..., dt=True)`` ran a 1 s step and ``radii=True`` a 1 m disc without a word. A type
+    test per value, not a conversion, so the simulator's calls pay well under a microsecond."""
+    for name, value in values.items():
+        if isinstance(value, (bool, np.bool_)) or (isinstance(value, np.ndarray) and value.dtype == np.bool_):
+            raise SimulationError(f"{where}: {name} must be a number, not a bool, got {value!r}")
 
 
 class LayoutWarning(UserWarning):

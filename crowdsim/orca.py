@@ -38,7 +38,7 @@ from typing import Final
 
 import numpy as np
 
-from crowdsim.errors import SimulationError, got, real_number, whole_number
+from crowdsim.errors import SimulationError, got, real_number, refuse_bools, whole_number
 from crowdsim.world import MIN_DT, MOST_COORDINATE
 
 RVO_EPSILON: Final[float] = 1e-5  # RVO2's Definitions.h: tolerance for (almost) parallel lines
@@ -354,6 +354,7 @@ def orca_velocities(
     pref_velocities, radii or max_speeds, whose squares would overflow, and for a shorter dt, whose inverse
     would.
     """
+    refuse_bools("orca_velocities", dt=dt, radii=radii, max_speeds=max_speeds)
     positions = np.asarray(positions, dtype=float)
     velocities = np.asarray(velocities, dtype=float)
     n_agents = len(positions)

@@ -90,3 +90,18 @@ def test_absurd_radii_and_speeds_are_refused_in_one_line(radii, speeds, message)
         with pytest.raises(ValueError) as exc:
             orca_velocities(APART * 0.1, moving, STILL, radii, speeds, OrcaParams(), 0.4)
     assert str(exc.value) == f"orca_velocities: every {message}"
+
+
+@pytest.mark.parametrize(
+    "radii, max_speeds, dt, name",
+    [
+        (0.5, 1.0, True, "dt"),
+        (True, 1.0, 0.4, "radii"),
+        (np.array([True, True]), 1.0, 0.4, "radii"),
+        (0.5, np.True_, 0.4, "max_speeds"),
+    ],
+)
+def test_a_bool_is_refused_as_a_step_a_radius_or_a_speed(radii, max_speeds, dt, name):
+    """Python takes True for 1: dt=True ran a 1 s step and a radius of True a 1 m disc without a word."""
+    with pytest.raises(ValueError, match=rf"^orca_velocities: {name} must be a number, not a bool, got "):
+        orca_velocities(APART, STILL, STILL, radii, max_speeds, OrcaParams(), dt)
