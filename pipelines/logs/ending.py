@@ -21,6 +21,7 @@ from crowdsim.distances import min_distance_between_steps
 from crowdsim.env_config import EnvConfig
 from crowdsim.errors import SimulationError
 from pipelines.errors import PipelineError
+from pipelines.logs.identity import differing_settings, shown
 from pipelines.logs.reader import Recording
 
 SUCCESS: Final[str] = "success"
@@ -193,3 +194,16 @@ def titled(rec: Recording) -> str:
     (review's figures once named neither: a timeout read as any run)."""
     outcome = recording_outcome(rec)
     return rec.label if outcome is None else f"{rec.label}: {outcome}"
+
+
+def compare_labels(a: Recording, b: Recording) -> dict[str, str]:
+    """review --compare's legend entry of each run: its label, the settings in which the two differ (two runs
+    of one scene with another MPC weight read the same without them) and, on a line of its own, how it ended
+    as ``titled`` says it (the overlay once tagged a timeout as it tagged a success)."""
+    differ = differing_settings(a, b)
+    labels = {}
+    for i, (tag, rec) in enumerate((("A", a), ("B", b))):
+        label = " / ".join([rec.label, *(f"{key} {shown(values[i])}" for key, *values in differ)])
+        outcome = recording_outcome(rec)
+        labels[tag] = label if outcome is None else f"{label}\n{outcome}"
+    return labels

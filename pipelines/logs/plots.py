@@ -15,8 +15,7 @@ from typing import Any, Final
 import numpy as np
 
 from pipelines.errors import PipelineError
-from pipelines.logs.ending import titled
-from pipelines.logs.identity import differing_settings, shown
+from pipelines.logs.ending import compare_labels, titled
 from pipelines.logs.reader import Recording
 from pipelines.logs.view import EpisodeView, episode_view
 from pipelines.whole_files import save_figure
@@ -166,12 +165,17 @@ def _dedupe_legend(ax: Any, *, below: bool = False) -> None:
 
 
 def plot_compare(a: Recording, b: Recording, out: str | Path) -> None:
+    fig = compare_figure(a, b)
+    save_figure(Path(out), lambda name: fig.savefig(name, dpi=120, bbox_inches="tight"))
+
+
+def compare_figure(a: Recording, b: Recording) -> Any:
     """Both runs' trajectories on one axes: A solid, B dashed, robots in the same colours."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(7, 7))
     ax = fig.add_subplot()
-    labels = _compare_labels(a, b)
+    labels = compare_labels(a, b)
     for rec, style, alpha in ((a, "-", 1.0), (b, "--", 0.8)):
         view = episode_view(rec)
         tag = "A" if rec is a else "B"
@@ -188,17 +192,7 @@ def plot_compare(a: Recording, b: Recording, out: str | Path) -> None:
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.set_title("A solid, B dashed")
     _dedupe_legend(ax, below=True)
-    save_figure(Path(out), lambda name: fig.savefig(name, dpi=120, bbox_inches="tight"))
-
-
-def _compare_labels(a: Recording, b: Recording) -> dict[str, str]:
-    """Each run's legend entry: controller, predictor, scene, and the settings in which the two differ (the
-    two runs of one scene with another MPC weight read the same without them)."""
-    differ = differing_settings(a, b)
-    return {
-        tag: " / ".join([rec.label, *(f"{key} {shown(values[i])}" for key, *values in differ)])
-        for i, (tag, rec) in enumerate((("A", a), ("B", b)))
-    }
+    return fig
 
 
 ANIMATION_SUFFIXES: Final = (".gif", ".mp4")

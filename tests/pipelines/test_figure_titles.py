@@ -87,3 +87,21 @@ def test_the_last_frame_of_a_planned_run_lists_no_plan(tmp_path):
         shown = {t.get_text(): t.get_visible() and h.get_visible() for h, t in zip(legend.legend_handles,
                  legend.get_texts(), strict=True)}  # fmt: skip
         assert (shown["robot plan"], shown["predicted human path"]) == expected, row
+
+
+def test_the_overlays_legend_says_how_each_run_ended(timed_out, tmp_path, capsys):
+    """review --compare --plot tagged each run by its label alone, 'A: straight / circle / seed 0 /
+    env.time_limit 6.0', a timeout as a success; each tag now says how its run ended, on a line of its own,
+    in the words of review's titles."""
+    from pipelines.logs.plots import compare_figure
+    from pipelines.logs.reader import read_recording
+
+    argv = ["simulate", "--controller", "straight", "--humans", "4", "--record", str(tmp_path / "b")]
+    assert run_cli(capsys, *argv, "--no-progress")[0] == 0
+    (other,) = (tmp_path / "b").glob("*.mcap")
+    fig = compare_figure(read_recording(timed_out[1]), read_recording(other))
+    tags = [t.get_text() for t in fig.axes[0].get_legend().get_texts() if t.get_text()[:2] in ("A:", "B:")]
+    assert tags == [
+        "A: straight / circle / seed 0 / env.time_limit 6.0\ntimeout at 5.2 s (time limit 6 s)",
+        "B: straight / circle / seed 0 / env.time_limit 40.0\nsuccess in 10.4 s",
+    ]
