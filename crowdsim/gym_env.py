@@ -128,6 +128,7 @@ from crowdsim.gym_reward import (
     surface_distances,
 )
 from crowdsim.metrics import COLLISION_DISTANCE, EpisodeMetrics, episode_metrics
+from crowdsim.outcome import ended_text
 from crowdsim.profiles import as_env_config
 from crowdsim.replay import Recording
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, check_sizes
@@ -343,6 +344,8 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         title = f"{self._episode['scenario']}{'' if seed is None else f', seed {seed}'}: "
         # As the legend's snapshot time: all its digits (":.1f" titled a 0.25 s step "t = 0.2 s").
         title += f"t = {round(traj.n_steps * self.config.dt, 6):g} s"
+        if self._done:
+            title += f"\n{ended_text(self.episode_metrics(), self._contact_ended, self.config)}"
         return render_frame(traj, title, size=RENDER_SIZE, dpi=RENDER_DPI)
 
     def close(self) -> None:

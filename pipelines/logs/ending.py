@@ -20,14 +20,10 @@ import numpy as np
 from crowdsim.distances import min_distance_between_steps
 from crowdsim.env_config import EnvConfig
 from crowdsim.errors import SimulationError
+from crowdsim.outcome import CONTACT, CUT_SHORT, SUCCESS, TIME_LIMIT, outcome_text
 from pipelines.errors import PipelineError
 from pipelines.logs.identity import differing_settings, shown
 from pipelines.logs.reader import Recording
-
-SUCCESS: Final[str] = "success"
-TIME_LIMIT: Final[str] = "time_limit"
-CONTACT: Final[str] = "contact"  # a robot touched a human in the last step, before the time limit
-CUT_SHORT: Final[str] = "cut_short"  # stopped before the time limit by whoever stepped it
 
 
 def max_steps(rec: Recording) -> int | None:
@@ -154,23 +150,6 @@ def metric_shown(name: str, value: Any, end: str | None) -> Any:
     if name == "timeout" and value is True and end in (CONTACT, CUT_SHORT):
         return "yes (the metric: not success; the time limit did not end it)"
     return value
-
-
-def outcome_text(end: str | None, end_s: float, limit_s: float | None, travel_s: float | None = None) -> str:
-    """How an episode ended, as simulate's and review's figure titles say it: "success in 12.2 s", "timeout
-    at 5.2 s (time limit 6 s)". A title once said "timeout" alone: not after how long, nor that the paper's
-    profile starts no step within timeout_margin of the limit, so a 6 s limit ends its run at 5.2 s."""
-    at = f"at {end_s:g} s"
-    limit = "" if limit_s is None else f" (time limit {limit_s:g} s)"
-    if end == SUCCESS:
-        return f"success in {end_s if travel_s is None else travel_s:g} s"
-    if end == TIME_LIMIT:
-        return f"timeout {at}{limit}"
-    if end == CONTACT:
-        return f"robot-human contact {at}{limit}"
-    if end == CUT_SHORT:
-        return f"stopped {at} by its loop{limit}"
-    return f"no success, ended {at}{limit}"  # what ended it is not recorded
 
 
 def recording_outcome(rec: Recording) -> str | None:
