@@ -200,7 +200,7 @@ def test_a_callers_meta_may_not_relabel_the_episode():
 
 def test_run_episodes_closes_its_controller_even_when_an_episode_raises(monkeypatch):
     controller = Scripted()
-    monkeypatch.setattr("pipelines.loop.episode.make_controller", lambda spec, env: controller)
+    monkeypatch.setattr("pipelines.loop.episode.make_controller", lambda spec, env, read=None: controller)
 
     def broken_observers():
         raise RuntimeError("observer factory broke")
