@@ -707,7 +707,7 @@ def test_records_without_a_config_still_load_and_resume(tmp_path, capsys):
 
 
 def test_a_sweep_applies_mpc_values_to_every_method_as_part_of_the_cell(tmp_path, capsys):
-    argv = ["sweep", "--experiment", "table2", "--humans", "5", "--dry-run", "--out", str(tmp_path)]
+    argv = ["sweep", "--experiment", "table2", "--humans", "5", "--dry-run", "--out", str(tmp_path / "out")]
     assert main([*argv, "--set", "mpc.w_coll=1e6", "--set", "mpc.horizon=4"]) == 0
     out = capsys.readouterr().out
     assert "cmpc-social_lstm_eth-F-ibr-w_coll=1000000.0-m=none-paper-visible-h5-r3" in out

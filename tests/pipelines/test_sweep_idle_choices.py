@@ -138,7 +138,8 @@ def test_a_choice_some_cell_reads_is_taken(options, tmp_path, capsys):
 def test_a_config_files_choices_pass_as_they_may_serve_other_sweeps(tmp_path, capsys):
     (tmp_path / "run.toml").write_text("[env]\nrobots_visible = false\nrobot_spacing = 2.0\n")
     sweep = ["sweep", "--experiment", "baselines", "--crowd", "eth_test", "--robots", "1", "--humans", "3"]
-    assert main(["--config", str(tmp_path / "run.toml"), *sweep, "--dry-run", "--out", str(tmp_path)]) == 0
+    out = tmp_path / "out"  # not the config's folder: a sweep and its dry run refuse a folder of others
+    assert main(["--config", str(tmp_path / "run.toml"), *sweep, "--dry-run", "--out", str(out)]) == 0
 
 
 # Every refused choice at once, as a sweep made before the refusal ran them: 2 methods x 2 crossings.
