@@ -661,9 +661,12 @@ def test_a_recording_killed_at_random_moments_loses_no_finished_episode(tmp_path
             rec = read_recording(folder / names[seed])
             assert not rec.truncated and not rec.problems and not rec.message_problems()
             assert len(rec.data("/robots")) == states and len(rec.data("/episode/metrics")) == 1
-        for part in parts:  # read by name: truncated, or no recording yet; never another exception
+        # read by name: truncated, no recording yet, or whole (killed between its data's sync and its rename,
+        # a window of the fsync's milliseconds since outputs are replaced durably); never another exception
+        for part in parts:
             try:
-                assert read_recording(part).truncated
+                rec = read_recording(part)
+                assert rec.truncated or not (rec.problems or rec.message_problems())
             except PipelineError as exc:
                 assert str(part) in str(exc)
 
