@@ -212,28 +212,38 @@ def current_sha256(predictor: str, directory: str | Path | None = None) -> str |
 
 
 def recalibrate_command(
-    predictor: str, source: str, alpha: float, sensor_range: float | None = None, sensor_tracks: bool = True
+    predictor: str,
+    source: str,
+    alpha: float,
+    sensor_range: float | None = None,
+    sensor_tracks: bool = True,
+    kind: str | None | EllipsisType = ...,
 ) -> str:
     """The ``crowdmpc calibrate`` command line that makes the block of ``(predictor, source, alpha)``, behind
-    a sensor of ``sensor_range`` m (reporting no track lengths unless ``sensor_tracks``) where given."""
+    a sensor of ``sensor_range`` m (reporting no track lengths unless ``sensor_tracks``) where given.
+    ``kind``: the model kind of the zoo entry ``predictor`` loads, as the caller located it (None: no zoo
+    entry; ``...``: located here, reading the manifest)."""
     sensor = _sensor_options(sensor_range, sensor_tracks)
     return (
-        f"{_crowdmpc(predictor)} calibrate --predictor {predictor} --source {source} "
+        f"{_crowdmpc(predictor, kind)} calibrate --predictor {predictor} --source {source} "
         f"--alpha {alpha_text(alpha)}{sensor}"
     )
 
 
-def _crowdmpc(predictor: str) -> str:
+def _crowdmpc(predictor: str, kind: str | None | EllipsisType = ...) -> str:
     """``crowdmpc``, with the ``--plugin`` a zoo model of a plugin net needs to load (the command said to run
-    failed with "a plugin that is not registered" without it)."""
+    failed with "a plugin that is not registered" without it), of the model ``kind`` a caller located
+    (``...``: located here)."""
     from predictors.models import PLUGIN_PATTERN
     from predictors.zoo import locate
 
-    try:
-        located = locate(predictor)
-    except PredictorError:
-        return "crowdmpc"
-    model = located.entry.model if located is not None else ""
+    if kind is ...:
+        try:
+            located = locate(predictor)
+        except PredictorError:
+            return "crowdmpc"
+        kind = located.entry.model if located is not None else None
+    model = kind or ""
     return f"crowdmpc --plugin {model}" if PLUGIN_PATTERN.fullmatch(model) else "crowdmpc"
 
 
@@ -269,13 +279,20 @@ def made_with(block: Calibration) -> dict[str, str]:
     return {key: str(value) for key, value in found.items()}
 
 
-def calibrate_command(block: Calibration, alphas: Sequence[float] = (), **changed: object) -> str:
+def calibrate_command(
+    block: Calibration,
+    alphas: Sequence[float] = (),
+    *,
+    kind: str | None | EllipsisType = ...,
+    **changed: object,
+) -> str:
     """The ``crowdmpc calibrate`` command line that makes ``block`` again, at ``alphas`` (default its own)
-    with the settings it records (``made_with``) but those ``changed`` (``episodes=400``)."""
+    with the settings it records (``made_with``) but those ``changed`` (``episodes=400``); ``kind`` as
+    ``recalibrate_command`` takes it."""
     alpha = ",".join(alpha_text(a) for a in alphas or (block.alpha,))
     settings = made_with(block) | {key: str(value) for key, value in changed.items()}
     return (
-        f"{_crowdmpc(block.predictor)} calibrate --predictor {block.predictor} --source {block.source} "
+        f"{_crowdmpc(block.predictor, kind)} calibrate --predictor {block.predictor} --source {block.source} "
         f"--alpha {alpha}"
         + "".join(f" --{key} {value}" for key, value in settings.items())
         + _sensor_options(block.sensor_range, block.sensor_tracks)

@@ -19,23 +19,30 @@ if TYPE_CHECKING:
     from pipelines.loop.controllers import ControllerSpec
     from pipelines.loop.margins import Located
     from predictors.calibration import Calibration
+    from predictors.manifest import ZooEntry
 
     Planned = Calibration | None | EllipsisType  # the block planned with, None: none; ...: not read yet
+    # the zoo entry the predictor loads, whose model kind a quoted calibrate command registers (--plugin)
+    Entry = ZooEntry | None | EllipsisType  # None: a registered predictor or none; ...: located for it
 
 
 def calibration_notes(
-    spec: ControllerSpec, config: RunConfig, located: Located | None | EllipsisType = ...
+    spec: ControllerSpec,
+    config: RunConfig,
+    located: Located | None | EllipsisType = ...,
+    entry: Entry = ...,
 ) -> list[str]:
     """Every note above for a simulate run of ``spec`` under ``config``, of the block its controller plans
-    with as the run read it (``located``: ``MarginSpec.located``'s; ``...``: each note looks it up)."""
+    with as the run read it (``located``: ``MarginSpec.located``'s; ``...``: each note looks it up) and of
+    its predictor's zoo ``entry`` as the run located it (``...``: a note quoting a command locates it)."""
     block = located if located is ... or located is None else located[1]
     env, sim = config.env, config.simulate
     view = sim.sensor_range, sim.sensor_tracks
     visibility = "visible" if env.robots_visible else "invisible"
     found = (
-        calibration_world_note(spec, env.profile, visibility, env.crowd, *view, as_read=block),
-        sensor_margins_note(spec, *view, as_read=block),
-        calibration_controller_note(spec, *view, as_read=block),
+        calibration_world_note(spec, env.profile, visibility, env.crowd, *view, as_read=block, entry=entry),
+        sensor_margins_note(spec, *view, as_read=block, entry=entry),
+        calibration_controller_note(spec, *view, as_read=block, entry=entry),
         calibration_team_note(spec, [config.scenario.humans], config.scenario.robots, *view, as_read=block),
         calibration_physics_note(spec, changed_physics(config), *view, as_read=block),
     )
@@ -50,6 +57,7 @@ def calibration_world_note(
     sensor_range: float | None = None,
     sensor_tracks: bool = True,
     as_read: Planned = ...,
+    entry: Entry = ...,
 ) -> str | None:
     """A line for closed-loop conformal margins calibrated under other conventions than the run's (the
     profile, the robots' visibility) or among other humans (a replayed ``crowd``: calibrate runs ORCA's),
@@ -75,7 +83,8 @@ def calibration_world_note(
     measured = (block.details.get("profile"), block.details.get("visibility"))
     if None in measured or measured == (profile, visibility):
         return None
-    command = recalibrate_command(name, margins.source, margins.alpha) + _block_options(block)
+    command = recalibrate_command(name, margins.source, margins.alpha, kind=_kind(entry))
+    command += _block_options(block)
     return (
         f"note: the closed-loop margins of {name!r} at alpha={alpha_text(margins.alpha)} were calibrated "
         f"under profile {measured[0]} with robots {measured[1]}, this run is {profile} with robots "
@@ -171,31 +180,33 @@ def calibration_controller_note(
     sensor_range: float | None = None,
     sensor_tracks: bool = True,
     as_read: Planned = ...,
+    entry: Entry = ...,
 ) -> str | None:
     """A line for closed-loop margins calibrated with another controller than the run's (``calibrate
     --controller dmpc`` for a CMPC run), None otherwise (``controller_note``)."""
     block = _planned_block(spec.behind(sensor_range, sensor_tracks), as_read)
-    return None if block is None else controller_note(block, spec.controller)
+    return None if block is None else controller_note(block, spec.controller, entry)
 
 
-def controller_note(block: Calibration, controller: str) -> str | None:
+def controller_note(block: Calibration, controller: str, entry: Entry = ...) -> str | None:
     """A line for a run of MPC ``controller`` planning with the margins of ``block``, a closed-loop block
     calibrated with another controller (``calibrate --controller``, recorded in its details), None otherwise,
     as ``calibration_world_note`` says it of another profile: CMPC's and DMPC's robots move
     otherwise, and so do the humans who answer them, but one block is stored per alpha (a recalibration
     replaces it) and a run planned with the other controller's silently. Not refused: an experiment may hold
-    the margins fixed across controllers."""
+    the margins fixed across controllers. ``entry``: the predictor's zoo entry as the run located it, whose
+    model kind the quoted command registers (``...``: the command locates it)."""
     from predictors.calibration_store import calibrate_command
     from predictors.conformal import alpha_text
 
     made = block.details.get("controller") if block.source == "closed-loop" else None
     if made is None or made == controller:
         return None
+    command = calibrate_command(block, kind=_kind(entry), controller=controller)
     return (
         f"note: the closed-loop margins of {block.predictor!r} at alpha={alpha_text(block.alpha)} were "
         f"calibrated with controller {made}, this run's is {controller}: their coverage here is not measured "
-        f"({calibrate_command(block, controller=controller)} measures it, replacing that block for every "
-        "run; CROWDMPC_ZOO=DIR keeps it apart)"
+        f"({command} measures it, replacing that block for every run; CROWDMPC_ZOO=DIR keeps it apart)"
     )
 
 
@@ -208,7 +219,11 @@ _MEASURED_BEHIND = {
 
 
 def sensor_margins_note(
-    spec: ControllerSpec, sensor_range: float | None, sensor_tracks: bool = True, as_read: Planned = ...
+    spec: ControllerSpec,
+    sensor_range: float | None,
+    sensor_tracks: bool = True,
+    as_read: Planned = ...,
+    entry: Entry = ...,
 ) -> str | None:
     """A line for calibrated margins made with another view of the humans than the run's (``sensor_range`` m;
     None: every human seen), None otherwise. A calibration records the sensor its robots were behind
@@ -238,10 +253,8 @@ def sensor_margins_note(
         options = _block_options(block, sensor=False)
         if sensor_range is not None:
             options += f" --sensor-range {sensor_range:g}" + ("" if sensor_tracks else " --no-sensor-tracks")
-        command = (
-            f"; {recalibrate_command(name, margins.source, margins.alpha)}{options} calibrates {own}, "
-            "stored beside that block"
-        )
+        recalibrate = recalibrate_command(name, margins.source, margins.alpha, kind=_kind(entry))
+        command = f"; {recalibrate}{options} calibrates {own}, stored beside that block"
     if sensor_range is None:
         return (
             f"note: the closed-loop margins of {name!r} at alpha={alpha} were calibrated behind a sensor of "
@@ -320,6 +333,12 @@ def _planned_block(spec: ControllerSpec, as_read: Planned = ...) -> Any:
         )
     except PredictorError:
         return None
+
+
+def _kind(entry: Entry) -> str | None | EllipsisType:
+    """The model kind of ``entry`` that a quoted calibrate command registers, ``...`` where the caller
+    located none (the command then reads the manifest for it)."""
+    return ... if entry is ... else None if entry is None else entry.model
 
 
 def _block_options(block: Any, sensor: bool = True) -> str:

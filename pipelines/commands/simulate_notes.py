@@ -32,7 +32,7 @@ def noted_reads(cfg: RunConfig, spec: ControllerSpec, checked: PredictorRead | N
         checks.size_note(spec, scenario.humans, scenario.robots),
         checks.tolerance_note(spec),
         *checks.zoo_notes(spec.predictor_name, entry),
-        *calibration_notes(spec, cfg, read.calibration),
+        *calibration_notes(spec, cfg, read.calibration, entry),
     )
     for note in filter(None, notes):
         print(note, file=sys.stderr)

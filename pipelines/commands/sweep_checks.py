@@ -309,8 +309,8 @@ def method_notes(
     ``calibration_physics_note`` lines (in another crowd's motion, [env] / [env.orca]), each once, naming
     the methods it applies to: a grid of --vary columns printed the same line for each of eight methods.
     ``entries``: the zoo entry each zoo predictor loads, located already (``check_predictors``'; None:
-    located here); ``blocks``: the block each method plans with, by label (``check_margins``'; None: each
-    calibration note looks it up)."""
+    located here; the calibrate commands the notes quote take its model kind from it); ``blocks``: the block
+    each method plans with, by label (``check_margins``'; None: each calibration note looks it up)."""
     methods: dict[str, list[str]] = {}  # a note's text -> the methods it applies to, in table order
     seen: set[str] = set()
     cells = list(cells)
@@ -330,13 +330,14 @@ def method_notes(
         at = ... if blocks is None else blocks.get(cell.method, ...)
         view = cell.world.sensor_range, cell.world.sensor_tracks
         block = at if at is ... or at is None else at[1]
+        entry = located[cell.spec.predictor_name]
         for note in (
             separate_goals_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
             goal_room_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
-            horizon_note(cell.spec, located[cell.spec.predictor_name]),
+            horizon_note(cell.spec, entry),
             size_note(cell.spec, max(sizes[cell.method]), cell.n_robots),  # its largest crowd's NLP
             tolerance_note(cell.spec),
-            *zoo_notes(cell.spec.predictor_name, located[cell.spec.predictor_name]),
+            *zoo_notes(cell.spec.predictor_name, entry),
             flock_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
             calibration_world_note(
                 cell.spec,
@@ -346,9 +347,10 @@ def method_notes(
                 cell.world.sensor_range,
                 cell.world.sensor_tracks,
                 as_read=block,
+                entry=entry,
             ),
-            sensor_margins_note(cell.spec, *view, as_read=block),
-            calibration_controller_note(cell.spec, *view, as_read=block),
+            sensor_margins_note(cell.spec, *view, as_read=block, entry=entry),
+            calibration_controller_note(cell.spec, *view, as_read=block, entry=entry),
             calibration_team_note(cell.spec, sizes[cell.method], cell.n_robots, *view, as_read=block),
             calibration_physics_note(
                 cell.spec,

@@ -266,6 +266,11 @@ def test_a_calibrate_command_offered_for_a_plugin_model_registers_its_plugin(tmp
     assert recalibrate_command("toy_walk", "closed-loop", 0.1) == (
         f"crowdmpc --plugin {TOY} calibrate --predictor toy_walk --source closed-loop --alpha 0.1"
     )
+    # the model kind a command located already, as its notes hand it over
+    assert recalibrate_command("toy_walk", "closed-loop", 0.1, kind=TOY) == recalibrate_command(
+        "toy_walk", "closed-loop", 0.1
+    )
+    assert recalibrate_command("toy_walk", "closed-loop", 0.1, kind=None).startswith("crowdmpc calibrate ")
     assert recalibrate_command("social_lstm_eth", "real", 0.05, 3.0, False) == (
         "crowdmpc calibrate --predictor social_lstm_eth --source real --alpha 0.05 --sensor-range 3 "
         "--no-sensor-tracks"

@@ -184,3 +184,27 @@ def test_a_sweeps_calibration_notes_read_the_blocks_its_margins_check_read(tmp_p
     assert "were calibrated with 3 robots among 5-9 humans" in capsys.readouterr().err  # of that block
     assert opened[shipped / "manifest.json"] == 1
     assert opened[shipped / "calibrations.json"] == 1
+
+
+def test_the_calibrate_commands_the_notes_quote_read_no_manifest_again(tmp_path, monkeypatch, capsys):
+    """A note quoting a `crowdmpc calibrate` command read the manifest again to tell whether the command
+    needs --plugin: Table II's dry run under profile v1 behind a sensor read it six times (once for the
+    checks, then for each method's world and sensor notes and DMPC's controller note), simulate's run three
+    times, and a `zoo add --replace` between the reads had a command register another model than was run."""
+    from pipelines.cli import main
+    from predictors import zoo
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    manifest = (zoo.checkpoints_dir() / "manifest.json").resolve()
+    quoted = "crowdmpc calibrate --predictor social_lstm_eth --source closed-loop"
+    opened = count_opens(monkeypatch, ".json")
+    plan = ["--experiment", "table2", "--predictor", "social_lstm_eth", "--humans", "5", "--episodes", "1"]
+    views = ["--margins", "conformal-shortfall:0.1", "--profile", "v1", "--sensor-range", "3"]
+    assert main(["sweep", *plan, *views, "--dry-run", "--out", str(tmp_path / "sweep")]) == 0
+    assert capsys.readouterr().err.count(quoted) == 3  # the world, sensor and controller notes
+    assert opened.pop(manifest) == 1
+    run = ["--humans", "2", "--robots", "1", "--episodes", "1", "--no-progress", "--set", "env.time_limit=2"]
+    run += ["--controller", "dmpc", "--predictor", "social_lstm_eth", *views[:4]]
+    assert main(["simulate", *run]) == 0
+    assert capsys.readouterr().err.count(quoted) == 2  # the world and controller notes
+    assert opened[manifest] == 1
