@@ -222,7 +222,7 @@ def planned_margins(cell: Cell) -> dict[str, Any]:
     classes = spec.margins.resolve_classes(name, horizon, sha256, at)
     planned = {
         "margins_m": list(spec.margins.resolve(name, horizon, sha256, at)),
-        "classes": None if classes is None else classes.to_json(),
+        "classes": None if classes is None else _planned_classes(classes.to_json()),
     }
     return json.loads(json.dumps(plain(planned)))  # as read back from a record
 
@@ -233,4 +233,15 @@ def _stored_margins(record: dict[str, Any] | None) -> dict[str, Any] | None:
     margins = config.get("margins") if isinstance(config, dict) else None
     if not isinstance(margins, dict) or "margins_m" not in margins:  # a controller that plans with none
         return None
-    return {"margins_m": margins.get("margins_m"), "classes": margins.get("classes")}
+    return {"margins_m": margins.get("margins_m"), "classes": _planned_classes(margins.get("classes"))}
+
+
+def _planned_classes(classes: Any) -> Any:
+    """Recorded margins per motion class less their sample counts: the controller plans with the classes'
+    edges and margins alone, and a recalibration that moved a count and no margin plans the same episodes
+    (constant_velocity's block remade after a63500e: 2 more standing samples at k = 1, every margin equal,
+    100 of 100 safe-configuration episodes equal), which a resume and --reuse refused as "other motion
+    classes"."""
+    if not isinstance(classes, dict):
+        return classes
+    return {key: value for key, value in classes.items() if key != "n"}

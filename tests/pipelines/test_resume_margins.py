@@ -2,7 +2,15 @@
 classes' margins alone and record [] as their common ones, so the refusal had read "planned with margins
 [] m, but the cell's margins are now [] m (per motion class)"."""
 
+import json
+
+import numpy as np
+
+from pipelines.cli import main
+from pipelines.experiments.log import episode_log
 from pipelines.experiments.resume_checks import _margins_change
+from predictors.calibration_store import save_calibration
+from tests.calibration_blocks import class_errors, constant_velocity_block
 
 NAMES = ["new", "standing", "slow", "walking"]
 
@@ -37,3 +45,41 @@ def test_classes_that_changed_otherwise_are_said_so():
     changed = _planned([], quantiles)
     changed["classes"]["standing_speed"] = 0.2
     assert _margins_change(_planned([], quantiles), changed) == "other motion classes than the cell's now"
+
+
+SHORTFALL_ARGV = ["sweep", "--experiment", "controllers", "--controllers", "cmpc", "--predictor",
+                  "constant_velocity", "--margins", "conformal-shortfall", "--humans", "1", "--robots", "1",
+                  "--backend", "inline", "--no-progress", "--jit", "off"]  # fmt: skip
+
+
+def _calibrate_classes(standing_error: float | None = None) -> None:
+    """constant_velocity's closed-loop block at alpha 0.1 with class margins 0.18 (c + 1) k (19 samples a
+    class), and a 20th standing sample of ``standing_error`` at every step where given: 0 moves the count and
+    no margin (the 18th smallest of 19 is the 19th of 20 when the 20th is the least), 1 moves the standing
+    margins to 0.38 k."""
+    errors, motion = class_errors(4)
+    if standing_error is not None:
+        errors = np.concatenate([errors, np.full((1, 4), standing_error)])
+        motion = np.concatenate([motion, [1]])
+    save_calibration(constant_velocity_block(errors, classes=motion, shortfall=errors))
+
+
+def test_a_recalibration_that_moved_a_class_count_and_no_margin_extends_the_cell(tmp_path, capsys):
+    """The resume check compared the records' class margins with the cell's whole, sample counts included: a
+    block remade with two more standing samples and every margin equal (constant_velocity's after a63500e)
+    refused the safe configuration's folders as planned with "other motion classes", their episodes equal."""
+    out = tmp_path / "sweep"
+    _calibrate_classes()
+    assert main([*SHORTFALL_ARGV, "--episodes-per-cell", "2", "--out", str(out)]) == 0
+    _calibrate_classes(standing_error=0.0)
+    capsys.readouterr()
+    assert main([*SHORTFALL_ARGV, "--episodes-per-cell", "4", "--out", str(out)]) == 0, (
+        capsys.readouterr().err
+    )
+    classes = [r["config"]["margins"]["classes"] for r in episode_log(out).load().values()]
+    assert sorted(c["n"][1][0] for c in classes) == [19, 19, 20, 20]  # each record names the block it used
+    assert len({json.dumps(c["quantiles"]) for c in classes}) == 1
+    _calibrate_classes(standing_error=1.0)  # a margin moved: refused as before
+    capsys.readouterr()
+    assert main([*SHORTFALL_ARGV, "--episodes-per-cell", "6", "--out", str(out)]) == 2
+    assert "planned with margins per motion class, standing [0.360, 0.720" in capsys.readouterr().err
