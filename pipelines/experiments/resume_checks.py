@@ -9,13 +9,16 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pipelines.errors import PipelineError
 from pipelines.experiments.log import EPISODES_FILE, episode_log
 from pipelines.experiments.run_lines import run_number
 from pipelines.experiments.tasks import Cell, EpisodeTask
 from pipelines.plain_json import plain
+
+if TYPE_CHECKING:
+    from pipelines.loop.margins import MarginSpec
 
 
 def read_recorded(
@@ -88,7 +91,7 @@ class ResumeChecks:
         crowd, sha256 = self.tasks[i].cell.world.crowd, record.get("crowd_sha256")
         if crowd != "orca" and isinstance(sha256, str):  # a record from before it was kept says nothing
             self._crowds.setdefault((crowd, sha256), i)
-        stored = _stored_margins(record)
+        stored = stored_margins(record)
         if stored is not None:
             key = (self.tasks[i].cell.key, json.dumps(stored, sort_keys=True))
             _keep_first(self._margins, key, (i, stored))
@@ -213,21 +216,29 @@ def planned_margins(cell: Cell) -> dict[str, Any]:
     """The margins ``cell``'s MPC plans with now, as its records state them (MPCController.describe's
     "margins": the same for every human, and per motion class), in their JSON form."""
     from pipelines.loop.mpc_setup import mpc_config
-    from predictors.registry import checkpoint_sha256
 
     spec = cell.spec.behind(cell.world.sensor_range, cell.world.sensor_tracks)  # as the worker builds it
-    name, sha256 = spec.predictor_name, checkpoint_sha256(spec.predictor_name)
     horizon = mpc_config(spec, world=cell.world.env_config().world()).horizon
-    at = spec.margins.located(name, horizon, sha256)  # the calibrations read once, as the controller does
-    classes = spec.margins.resolve_classes(name, horizon, sha256, at)
+    return margins_planned(spec.margins, spec.predictor_name, horizon)
+
+
+def margins_planned(margins: MarginSpec, predictor: str | None, horizon: int) -> dict[str, Any]:
+    """What ``margins`` plan with now for the zoo's ``predictor`` at ``horizon``, in ``planned_margins``'
+    form: a resume checks a cell's records against it, and `config show --from-sweep` a remade
+    calibration's."""
+    from predictors.registry import checkpoint_sha256
+
+    sha256 = checkpoint_sha256(predictor)
+    at = margins.located(predictor, horizon, sha256)  # the calibrations read once, as the controller does
+    classes = margins.resolve_classes(predictor, horizon, sha256, at)
     planned = {
-        "margins_m": list(spec.margins.resolve(name, horizon, sha256, at)),
+        "margins_m": list(margins.resolve(predictor, horizon, sha256, at)),
         "classes": None if classes is None else _planned_classes(classes.to_json()),
     }
     return json.loads(json.dumps(plain(planned)))  # as read back from a record
 
 
-def _stored_margins(record: dict[str, Any] | None) -> dict[str, Any] | None:
+def stored_margins(record: dict[str, Any] | None) -> dict[str, Any] | None:
     """What ``record`` says its episode planned with, in ``planned_margins``' form; None: it says nothing."""
     config = record.get("config") if record is not None else None
     margins = config.get("margins") if isinstance(config, dict) else None

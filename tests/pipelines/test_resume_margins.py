@@ -2,6 +2,7 @@
 classes' margins alone and record [] as their common ones, so the refusal had read "planned with margins
 [] m, but the cell's margins are now [] m (per motion class)"."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -52,16 +53,20 @@ SHORTFALL_ARGV = ["sweep", "--experiment", "controllers", "--controllers", "cmpc
                   "--backend", "inline", "--no-progress", "--jit", "off"]  # fmt: skip
 
 
-def _calibrate_classes(standing_error: float | None = None) -> None:
+def _calibrate_classes(
+    standing_error: float | None = None, created: str | None = None, added: int = 1
+) -> None:
     """constant_velocity's closed-loop block at alpha 0.1 with class margins 0.18 (c + 1) k (19 samples a
     class), and a 20th standing sample of ``standing_error`` at every step where given: 0 moves the count and
     no margin (the 18th smallest of 19 is the 19th of 20 when the 20th is the least), 1 moves the standing
-    margins to 0.38 k."""
+    margins to 0.38 k. ``added``: that many such samples (3 of 0: every class margin equal, and the plain
+    conformal margins 0.56 k become 0.54 k). ``created``: the block's creation time (None: now)."""
     errors, motion = class_errors(4)
     if standing_error is not None:
-        errors = np.concatenate([errors, np.full((1, 4), standing_error)])
-        motion = np.concatenate([motion, [1]])
-    save_calibration(constant_velocity_block(errors, classes=motion, shortfall=errors))
+        errors = np.concatenate([errors, np.full((added, 4), standing_error)])
+        motion = np.concatenate([motion, np.ones(added, dtype=motion.dtype)])
+    block = constant_velocity_block(errors, classes=motion, shortfall=errors)
+    save_calibration(block if created is None else dataclasses.replace(block, created=created))
 
 
 def test_a_recalibration_that_moved_a_class_count_and_no_margin_extends_the_cell(tmp_path, capsys):
@@ -83,3 +88,34 @@ def test_a_recalibration_that_moved_a_class_count_and_no_margin_extends_the_cell
     capsys.readouterr()
     assert main([*SHORTFALL_ARGV, "--episodes-per-cell", "6", "--out", str(out)]) == 2
     assert "planned with margins per motion class, standing [0.360, 0.720" in capsys.readouterr().err
+
+
+def test_a_calibration_remade_with_the_margins_planned_with_gives_no_note_of_other_episodes(tmp_path, capsys):
+    """`config show --from-sweep` said a rerun "gives other episodes" of every folder whose calibration was
+    made again (its creation time and data compared): the safe configuration's folders after
+    constant_velocity's was remade at 89af3ce with two more standing samples and every class margin equal.
+    The note now compares the margins planned with, as a resume does; a plain conformal folder, whose
+    margins moved with that sample, is still told."""
+    shortfall, plain = tmp_path / "cps", tmp_path / "cp"
+    _calibrate_classes(created="2026-01-01T00:00:00+00:00")
+    assert main([*SHORTFALL_ARGV, "--episodes-per-cell", "1", "--out", str(shortfall)]) == 0
+    plain_argv = [("conformal" if a == "conformal-shortfall" else a) for a in SHORTFALL_ARGV]
+    assert main([*plain_argv, "--episodes-per-cell", "1", "--out", str(plain)]) == 0
+    _calibrate_classes(standing_error=0.0, created="2026-01-02T00:00:00+00:00", added=3)
+    other = "so a rerun gives other episodes"
+    capsys.readouterr()
+    assert main(["config", "show", "--from-sweep", str(shortfall)]) == 0
+    printed, err = capsys.readouterr()
+    assert other not in printed + err
+    assert err == (
+        "note: constant_velocity's calibration was remade since with the margins this sweep planned with, so "
+        "a rerun plans with the same margins (its records name the new calibration).\n"
+    )
+    assert main(["config", "show", "--from-sweep", str(plain)]) == 0
+    assert other in capsys.readouterr().err
+    _calibrate_classes(standing_error=1.0, created="2026-01-03T00:00:00+00:00")  # the standing margins moved
+    assert main(["config", "show", "--from-sweep", str(shortfall)]) == 0
+    assert capsys.readouterr().err.startswith(
+        "note: The zoo no longer holds what this sweep ran with (constant_velocity's calibration changed "
+        f"since), {other}"
+    )
