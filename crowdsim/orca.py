@@ -214,6 +214,9 @@ def _check_magnitudes(
     state the simulator makes: within ``MOST_COORDINATE**2`` every component is within the bound; NaN, inf
     or a larger sum go on to the exact test by component."""
     most = MOST_COORDINATE
+    squares = np.vdot(positions, positions) + np.vdot(velocities, velocities) + np.vdot(pref, pref)
+    if squares + np.vdot(radii, radii) + np.vdot(speeds, speeds) <= most * most:
+        return  # every step's path: the names below are for a refusal only
     arrays = {
         "positions": (positions, "m"),
         "velocities": (velocities, "m/s"),
@@ -221,8 +224,6 @@ def _check_magnitudes(
         "radii": (radii, "m"),  # a radius of 1e300 overflowed the combined radius' square
         "max_speeds": (speeds, "m/s"),
     }
-    if sum(np.vdot(values, values) for values, _ in arrays.values()) <= most * most:
-        return
     for name, (values, unit) in arrays.items():
         beyond = ~(np.abs(values) <= most)
         if beyond.any():

@@ -258,19 +258,11 @@ def _replace_with_link(source: Path, target: Path) -> None:
     try:
         try:
             os.link(source, link)
-        except OSError:  # no hard links here (FAT, some network file systems): a synced copy
-            _copy_synced(source, link)
+        except OSError:  # no hard links here (FAT, some network file systems): a copy, which the rename syncs
+            shutil.copyfile(source, link)
         replace_durably(link, target)
     finally:
         link.unlink(missing_ok=True)
-
-
-def _copy_synced(source: Path, target: Path) -> None:
-    """``source`` copied to ``target`` and on disk before the call returns."""
-    with source.open("rb") as original, target.open("wb") as copy:
-        shutil.copyfileobj(original, copy)
-        copy.flush()
-        os.fsync(copy.fileno())
 
 
 def _write_synced(target: Path, data: bytes) -> None:
