@@ -25,10 +25,22 @@ def got(value: float) -> str:
 def refuse_bools(where: str, **values: object) -> None:
     """SimulationError for a bool given as a length, a speed or a step: Python takes True for 1, so
     ``orca_velocities(..., dt=True)`` ran a 1 s step and ``radii=True`` a 1 m disc without a word. A type
-    test per value, not a conversion, so the simulator's calls pay well under a microsecond."""
+    test per value, not a conversion, so the simulator's calls (a float or a float array) pay well under a
+    microsecond; a list, a tuple or an object array is looked into, as numpy turns ``[True, 0.3]`` into
+    ``[1.0, 0.3]``."""
     for name, value in values.items():
-        if isinstance(value, (bool, np.bool_)) or (isinstance(value, np.ndarray) and value.dtype == np.bool_):
+        if type(value) is not float and _holds_bool(value):  # a plain float, the common case, at once
             raise SimulationError(f"{where}: {name} must be a number, not a bool, got {value!r}")
+
+
+def _holds_bool(value: object) -> bool:
+    if isinstance(value, np.ndarray):
+        if value.dtype != object:
+            return value.dtype == np.bool_
+        value = value.ravel().tolist()  # an object array's items are the Python objects it was given
+    if isinstance(value, list | tuple):
+        return any(_holds_bool(item) for item in value)
+    return isinstance(value, bool | np.bool_)
 
 
 class LayoutWarning(UserWarning):

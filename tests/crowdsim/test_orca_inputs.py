@@ -99,9 +99,20 @@ def test_absurd_radii_and_speeds_are_refused_in_one_line(radii, speeds, message)
         (True, 1.0, 0.4, "radii"),
         (np.array([True, True]), 1.0, 0.4, "radii"),
         (0.5, np.True_, 0.4, "max_speeds"),
+        # numpy turns a list's bools into numbers: [True, 0.3] was a 1 m and a 0.3 m disc
+        ([True, 0.3], 1.0, 0.4, "radii"),
+        (0.5, (1.0, np.True_), 0.4, "max_speeds"),
+        (np.array([0.3, True], dtype=object), 1.0, 0.4, "radii"),
     ],
 )
 def test_a_bool_is_refused_as_a_step_a_radius_or_a_speed(radii, max_speeds, dt, name):
     """Python takes True for 1: dt=True ran a 1 s step and a radius of True a 1 m disc without a word."""
-    with pytest.raises(ValueError, match=rf"^orca_velocities: {name} must be a number, not a bool, got "):
+    with pytest.raises(ValueError) as exc:
         orca_velocities(APART, STILL, STILL, radii, max_speeds, OrcaParams(), dt)
+    given = {"radii": radii, "max_speeds": max_speeds, "dt": dt}[name]
+    assert str(exc.value) == f"orca_velocities: {name} must be a number, not a bool, got {given!r}"
+
+
+def test_lists_of_numbers_are_still_taken_as_radii_and_speeds():
+    new, _ = orca_velocities(APART, STILL, STILL, [0.3, 0.3], (1.0, 1), OrcaParams(), 0.4)
+    assert new.tolist() == [[0.0, 0.0], [0.0, 0.0]]
