@@ -71,6 +71,18 @@ def real_number(where: str, value: object, expected: str, ok: Callable[[float], 
     return plain
 
 
+def seconds(where: str, value: object) -> float:
+    """A time step or a duration as a plain float, when it is a real number (a Fraction too, as the settings
+    take it), else SimulationError "``where`` must be a real number of seconds": a Decimal or a text went on
+    to numpy's TypeError ("unsupported operand type(s) for /: 'float' and 'decimal.Decimal'"). Its bounds
+    are the caller's to check."""
+    return value if type(value) is float else real_number(where, value, "a real number of seconds", _any)
+
+
+def _any(_: float) -> bool:
+    return True
+
+
 def whole_number(where: str, value: object, expected: str, least: int) -> int:
     """``value`` as a plain int, when it is an integer (numpy's too, not a bool) of at least ``least``; else
     SimulationError "``where`` must be ``expected``, got ``value``"."""

@@ -38,7 +38,7 @@ from typing import Final
 
 import numpy as np
 
-from crowdsim.errors import SimulationError, got, real_number, refuse_bools, whole_number
+from crowdsim.errors import SimulationError, got, real_number, refuse_bools, seconds, whole_number
 from crowdsim.world import MIN_DT, MOST_COORDINATE
 
 RVO_EPSILON: Final[float] = 1e-5  # RVO2's Definitions.h: tolerance for (almost) parallel lines
@@ -348,14 +348,14 @@ def orca_velocities(
     positions, velocities: ``(A, 2)`` current state of every agent (each avoids all the others, or those in
     ``seen`` alone: a replayed person sees the robots, crowdsim.reaction);
     pref_velocities: ``(S, 2)`` for the agents in ``agents``; radii, max_speeds: scalars or ``(A,)``.
-    dt is the simulation time step (used only when agents already overlap), at least
-    ``crowdsim.world.MIN_DT``.
-    Returns ``(velocities (S, 2), used_lp3 (S,) bool)``. SimulationError (a ValueError) for a NaN, an
-    infinity or a value beyond ``crowdsim.world.MOST_COORDINATE`` in positions, velocities,
-    pref_velocities, radii or max_speeds, whose squares would overflow, and for a shorter dt, whose inverse
-    would.
+    dt: the simulation time step, a real number of seconds of at least ``crowdsim.world.MIN_DT`` (used only
+    when agents already overlap).
+    Returns ``(velocities (S, 2), used_lp3 (S,) bool)``. SimulationError (a ValueError) for a NaN, an infinity
+    or a value beyond ``crowdsim.world.MOST_COORDINATE`` in positions, velocities, pref_velocities, radii or
+    max_speeds, whose squares would overflow, and for a shorter dt, whose inverse would.
     """
     refuse_bools("orca_velocities", dt=dt, radii=radii, max_speeds=max_speeds)
+    dt = seconds("orca_velocities: dt", dt)
     positions = np.asarray(positions, dtype=float)
     velocities = np.asarray(velocities, dtype=float)
     n_agents = len(positions)

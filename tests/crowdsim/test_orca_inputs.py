@@ -3,6 +3,8 @@ largest of which keep its arithmetic finite, and a time step of at least crowdsi
 ValueError naming the array or the step."""
 
 import warnings
+from decimal import Decimal
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -116,3 +118,21 @@ def test_a_bool_is_refused_as_a_step_a_radius_or_a_speed(radii, max_speeds, dt, 
 def test_lists_of_numbers_are_still_taken_as_radii_and_speeds():
     new, _ = orca_velocities(APART, STILL, STILL, [0.3, 0.3], (1.0, 1), OrcaParams(), 0.4)
     assert new.tolist() == [[0.0, 0.0], [0.0, 0.0]]
+
+
+@pytest.mark.parametrize("dt", [Decimal("0.4"), "0.4", None, 0.4j])
+def test_a_step_that_is_no_real_number_is_refused_naming_dt(dt):
+    """A Decimal step ended in numpy's "unsupported operand type(s) for /: 'float' and 'decimal.Decimal'",
+    a text one in "'>=' not supported between instances of 'str' and 'float'"."""
+    with pytest.raises(ValueError) as exc:
+        orca_velocities(APART, STILL, STILL, 0.5, 1.0, OrcaParams(), dt)
+    assert str(exc.value) == f"orca_velocities: dt must be a real number of seconds, got {dt!r}"
+
+
+@pytest.mark.parametrize("dt", [Fraction(2, 5), np.float32(0.4), 1])
+def test_a_step_of_any_real_type_is_taken_as_its_float(dt):
+    """A Fraction ended in numpy's "loop of ufunc does not support argument 0 of type float"; EnvConfig takes
+    one as its float, and so does ORCA now."""
+    new, _ = orca_velocities(APART * 0.1, STILL, STILL, 0.3, 1.0, OrcaParams(), dt)
+    expected, _ = orca_velocities(APART * 0.1, STILL, STILL, 0.3, 1.0, OrcaParams(), float(dt))
+    assert new.tolist() == expected.tolist() and np.abs(new).max() > 0  # overlapping: dt is used
