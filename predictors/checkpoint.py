@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO, Final, NamedTuple
 
 from predictors.base import OBS_LEN
-from predictors.errors import CheckpointMismatch, PredictorError, short_repr
+from predictors.errors import CheckpointMismatch, DuplicateKey, PredictorError, short_repr, unique_keys
 from predictors.hashing import is_sha256, sha256_file
 
 if TYPE_CHECKING:
@@ -102,7 +102,9 @@ def read_document(path: Path, document_format: str, what: str) -> dict[str, Any]
 def parse_document(path: Path, data: bytes, document_format: str, what: str) -> dict[str, Any]:
     """``read_document`` of the bytes ``data`` read from ``path``."""
     try:
-        document = json.loads(data.decode("utf-8"))
+        document = json.loads(data.decode("utf-8"), object_pairs_hook=unique_keys)
+    except DuplicateKey as exc:
+        raise PredictorError(f"{path}: {exc}; give each key once (json would keep the last)") from None
     except UnicodeDecodeError:
         raise PredictorError(f"{path}: not valid JSON (not UTF-8 text)") from None
     except ValueError as exc:  # JSONDecodeError, or an integer literal of more than 4300 digits

@@ -23,6 +23,28 @@ class PredictorError(ValueError):
     """Base class of the user-facing errors raised by `predictors`."""
 
 
+class DuplicateKey(PredictorError):
+    """A JSON object that names a key twice (``unique_keys``)."""
+
+    def __init__(self, key: str):
+        super().__init__(f"the key {short_key(key)} appears twice in one object")
+        self.key = key
+
+
+def unique_keys(pairs: list[tuple[str, object]]) -> dict[str, object]:
+    """json's ``object_pairs_hook`` for the files a user may edit by hand (zoo manifests, predictor configs,
+    calibration files, train_settings.json): json keeps the last of a key given twice without a word, so a
+    value typed above the one already there did nothing. The object, or DuplicateKey naming the key."""
+    document = dict(pairs)
+    if len(document) < len(pairs):
+        seen: set[str] = set()
+        for key, _ in pairs:
+            if key in seen:
+                raise DuplicateKey(key)
+            seen.add(key)
+    return document
+
+
 class NoCasadiTwin(PredictorError):
     """A predictor that has no CasADi function at all (the ORCA oracle): the iterative best response then
     predicts with it numerically, and the coupled NLP cannot use it. A twin that exists but fails its

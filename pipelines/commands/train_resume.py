@@ -14,7 +14,7 @@ from typing import Any, Final
 
 from pipelines.errors import PipelineError
 from predictors.checkpoint import check_name, load_tensors
-from predictors.errors import PredictorError, short_key
+from predictors.errors import DuplicateKey, PredictorError, short_key, unique_keys
 
 # What fixes a training run: --resume continues it with these, and only --epochs may change.
 SETTINGS_FILE = "train_settings.json"
@@ -111,7 +111,11 @@ def read_run_settings(out: Path) -> dict[str, Any] | None:
     if not path.is_file():
         return None
     try:
-        recorded = json.loads(path.read_text(encoding="utf-8"))
+        recorded = json.loads(path.read_text(encoding="utf-8"), object_pairs_hook=unique_keys)
+    except DuplicateKey as exc:
+        raise PipelineError(
+            f"--resume: {path}: {exc}; give each key once (json would keep the last)"
+        ) from None
     except (OSError, ValueError, RecursionError) as exc:
         raise PipelineError(f"--resume: {path} is not readable JSON ({exc})") from None
     if not isinstance(recorded, dict):
