@@ -31,7 +31,7 @@ from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment
 from crowdsim.world import (
     A_MAX,
     DT,
-    MIN_DT,
+    LEAST,
     MOST_ACCEL,
     MOST_EPISODE_STEPS,
     MOST_SPEED,
@@ -41,6 +41,7 @@ from crowdsim.world import (
     V_MAX,
     V_PREF,
     WorldFacts,
+    check_least,
     finite_positive,
     history_rows,
 )
@@ -179,11 +180,11 @@ class EnvConfig:
                 raise SimulationError(
                     f"EnvConfig.{name} must be at most {most:g} {unit}, got {got(getattr(self, name))}"
                 )
+        for name in LEAST:  # the world facts' least values (dt's: max_steps = time_limit / dt stays finite)
+            check_least(f"EnvConfig.{name}", name, getattr(self, name))
 
     def _check_dt(self) -> None:
-        """A step within the episode (``dt <= time_limit``), and not so short that ``max_steps`` overflows."""
-        if self.dt < MIN_DT:
-            raise SimulationError(f"EnvConfig.dt must be at least {MIN_DT:g} s, got {got(self.dt)}")
+        """A step within the episode (``dt <= time_limit``); its least value is checked with the sizes."""
         if self.dt > self.time_limit:
             raise SimulationError(
                 f"EnvConfig.dt must be at most time_limit = {self.time_limit:g} s, got {got(self.dt)}"

@@ -17,7 +17,7 @@ import math
 from dataclasses import dataclass, fields
 from typing import Final
 
-from crowdsim.errors import SimulationError, real_number, whole_number
+from crowdsim.errors import SimulationError, got, real_number, whole_number
 
 # The largest sizes of the simulator's work, which WorldFacts and EnvConfig refuse beyond and the CLI's config
 # schema reads from here (pipelines.config.keys.MOST): 10**6 history rows took 21 s and 860 MB for three
@@ -34,6 +34,17 @@ MOST_COORDINATE: Final[float] = 1e9
 # preferred to stand went at 1 m/s). Here, beside MOST_COORDINATE, since crowdsim.env_config imports
 # crowdsim.orca.
 MIN_DT: Final[float] = 1e-6
+# The least of each world fact, which WorldFacts and EnvConfig refuse below: dt's is MIN_DT, the others a
+# millionth of their unit too, far below any body or motion of a crowd (the tests' least radius is 0.01 m)
+# and far above float64's subnormals, which passed "> 0": with [world] radius = 5e-324 a straight-line run
+# reported "contact (<9.88131e-324 m) 0.0 %" of robots that passed 0.07 m from people.
+LEAST: Final[dict[str, tuple[float, str]]] = {
+    "dt": (MIN_DT, "s"),
+    "radius": (1e-6, "m"),
+    "v_pref": (1e-6, "m/s"),
+    "v_max": (1e-6, "m/s"),
+    "a_max": (1e-6, "m/s^2"),
+}
 
 
 @dataclass(frozen=True)
@@ -55,7 +66,15 @@ class WorldFacts:
                 plain: float = history_rows(where, value)
             else:
                 plain = real_number(where, value, "a finite number > 0", finite_positive)
+                check_least(where, f.name, plain)
             object.__setattr__(self, f.name, plain)  # frozen: stores numpy's scalars as Python's
+
+
+def check_least(where: str, name: str, value: float) -> None:
+    """SimulationError "``where`` must be at least ..." when world fact ``name`` is below its ``LEAST``."""
+    least, unit = LEAST[name]
+    if value < least:
+        raise SimulationError(f"{where} must be at least {least:g} {unit}, got {got(value)}")
 
 
 def history_rows(where: str, value: object) -> int:

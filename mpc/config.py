@@ -36,8 +36,8 @@ from crowdsim import world
 from crowdsim.world import PAPER_ROBOTS as PAPER_ROBOTS  # Table I's weights were set for it; named here too
 from crowdsim.world import WorldFacts
 from mpc.errors import MPCConfigError
+from mpc.sizes import LEAST_STEP_TIME, check_counts, check_step_time
 from mpc.sizes import MAX_HORIZON as MAX_HORIZON  # its importers' name for it since before mpc.sizes
-from mpc.sizes import check_counts, check_step_time
 
 # Option types as Literals (values stay plain strings in JSON and MCAP metadata); the tuples are their values.
 Solver = Literal["fatrop", "ipopt"]
@@ -114,7 +114,13 @@ MPC_BOUNDS: Final[dict[str, tuple[float, str]]] = {
 # weighs a robot on its goal by w_goal / delta: delta = 1e-300 overflowed it (a NaN gradient; Fatrop hung).
 # At 1e-40 the NLP stays far from overflow (mpc/step_data.py); so does guidance's penalty disc, which divides
 # by mu w_goal (w_goal = 5e-324 with mu = 1e-3 made it zero). Checked as MPC_BOUNDS are (see there).
-MPC_LEAST: Final = {"mu": (1e-3, " 1/m^2"), "delta": (1e-40, ""), "w_goal": (1e-40, "")}
+# time_limit_s never enters the NLP; it is IPOPT's max_wall_time (mpc.sizes.LEAST_STEP_TIME has its least).
+MPC_LEAST: Final = {
+    "mu": (1e-3, " 1/m^2"),
+    "delta": (1e-40, ""),
+    "w_goal": (1e-40, ""),
+    "time_limit_s": (LEAST_STEP_TIME, " s"),
+}
 
 
 @dataclass(frozen=True)

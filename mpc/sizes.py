@@ -21,6 +21,10 @@ MOST_IBR_ITERATIONS: Final[int] = 1000  # j_max (Table I: 10): each one solves t
 # IPOPT refuse its options (a RuntimeError when the NLP was built), 2**32 wrapped to 0 and every solve failed.
 MOST_SOLVER_ITER: Final[int] = 100_000
 MOST_STEP_TIME: Final[float] = 3600.0  # s, time_limit_s (1 s by default): an hour for one control step
+# s, time_limit_s's least value (mpc.config.MPC_LEAST: checked as the NLP is built, not by every MPCConfig):
+# a nanosecond, the resolution of the clock the steps measure it with (time.perf_counter); 5e-324 passed
+# "> 0" and is no time that clock or IPOPT's max_wall_time tells from 1e-9, the tests' budget cut at once.
+LEAST_STEP_TIME: Final[float] = 1e-9
 # The counts: field -> (least, most)
 COUNTS: Final[dict[str, tuple[int, int]]] = {
     "horizon": (1, MAX_HORIZON),

@@ -17,7 +17,7 @@ from crowdsim.gym_env import CrowdNavEnv
 from crowdsim.gym_reward import RewardConfig
 from crowdsim.orca import OrcaParams
 from crowdsim.profiles import PROFILES, make_env_config
-from crowdsim.world import MIN_DT, WorldFacts
+from crowdsim.world import LEAST, MIN_DT, WorldFacts
 
 
 @pytest.mark.parametrize("profile", sorted(PROFILES))
@@ -191,3 +191,16 @@ def test_a_numeric_setting_refuses_what_is_no_number_naming_it(cls, name, kind, 
     # comparison that named no field.
     with pytest.raises(SimulationError, match=rf"^{cls.__name__}\.{name} must be .*, got {bad!r}$"):
         cls(**{name: bad})
+
+
+@pytest.mark.parametrize("cls", [WorldFacts, EnvConfig])
+@pytest.mark.parametrize("name", ["dt", "radius", "v_pref", "v_max", "a_max"])
+def test_a_world_fact_below_its_least_value_is_refused(cls, name):
+    """5e-324 passed "> 0": with [world] radius = 5e-324 a straight-line run reported no contact of robots
+    that passed 0.07 m from people. The least values are crowdsim.world.LEAST's, taken as given."""
+    least, unit = LEAST[name]
+    short = {"time_limit": 0.01, "timeout_margin": 0.0} if (cls, name) == (EnvConfig, "dt") else {}
+    assert getattr(cls(**{name: least}, **short), name) == least  # 1e4 steps of 1e-6 s
+    with pytest.raises(SimulationError) as exc:
+        cls(**{name: 5e-324})
+    assert str(exc.value) == f"{cls.__name__}.{name} must be at least {least:g} {unit}, got 4.94066e-324"

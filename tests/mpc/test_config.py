@@ -151,6 +151,16 @@ def test_numbers_that_enter_the_nlp_have_a_least_value(field, nlp):
         nlp(below, 2, 1)
 
 
+@pytest.mark.parametrize("nlp", [JointNLP, LocalNLP])
+def test_a_step_time_below_a_nanosecond_is_refused_as_the_nlp_is_built(nlp):
+    """time_limit_s = 5e-324 passed "> 0": no budget the steps' clock (perf_counter) or IPOPT's
+    max_wall_time tells from 1e-9, the least the tests cut a step at once with."""
+    check_solvable(MPCConfig(time_limit_s=1e-9))
+    with pytest.raises(MPCConfigError) as exc:
+        nlp(MPCConfig(time_limit_s=5e-324), 2, 1)
+    assert str(exc.value) == "time_limit_s must be at least 1e-09 s, got 5e-324"
+
+
 @pytest.mark.parametrize("solver", [CMPC, DMPC])
 def test_a_solver_is_not_built_beyond_a_bound(solver):
     """What a Python caller builds with an MPCConfig beyond a bound is refused before any solve."""

@@ -298,8 +298,9 @@ def test_a_simulate_path_named_none_reads_back_as_the_file_it_was(tmp_path, caps
         (MPC_LEAST, "delta", 0.0, "1e-200", "1e-200", "at least 1e-40", "1e-300"),
         (MPC_LEAST, "w_goal", 0.0, "1e-300", "1e-300", "at least 1e-40", "5e-324"),  # no guidance: it ran
         (MPC_BOUNDS, "rho", math.inf, "2000", "2000.0", "at most 1000 s^2", "1e+300"),
+        (MPC_LEAST, "time_limit_s", 0.0, "1e-12", "1e-12", "at least 1e-09 s", "5e-324"),
     ],
-    ids=["least", "least_w_goal", "most"],
+    ids=["least", "least_w_goal", "most", "least_time_limit_s"],
 )
 def test_a_sweep_run_beyond_a_bound_added_since_reads_back_and_does_not_rerun(
     tmp_path, capsys, monkeypatch, bounds, key, lifted, ran, shown, limit, typed
