@@ -2,13 +2,18 @@
 
 Every scene gives the predictor its first ``obs_len`` steps of every agent observed in them (world
 coordinates, absent entries 0 with ``mask`` False, the primary first) and asks for ``pred_len`` steps of
-all of them (``humans`` = every agent); there are no robots (``robots_future=None``). A predictor that
-also has ``sample(history, mask, robots_future, humans, horizon, k, rng) -> (k, H, N_h, 2)`` is scored
-top-k too.
+all of them (``humans`` = every agent); there are no robots (``robots_future=None``). A trained model whose
+config reads fewer steps (``obs_len`` 3 of a zoo entry edited by hand) is given the last of them only, and
+the agents seen there, as TrajNet++'s baselines hand a model ``xy[start_length:obs_length]`` of the scene's
+9 observed steps (``handed_steps``); the scores keep the scene's own observation, so Col-II still counts
+every neighbour seen in it and Col-I only the scenes whose every such neighbour the model predicted. A
+predictor that also has ``sample(history, mask, robots_future, humans, horizon, k, rng) -> (k, H, N_h, 2)``
+is scored top-k too.
 """
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -57,7 +62,7 @@ def predict_scene(predictor: Predictor, xy: np.ndarray, config: EvalConfig, rng:
     sees only those, all as humans, and ``prediction`` is ``(pred_len, len(agents), 2)`` in that order.
     """
     check_dataset_predictor(predictor)
-    history, mask, agents = observed_history(xy, config.obs_len)
+    history, mask, agents = observed_history(xy, config.obs_len, handed_steps(predictor, config.obs_len))
     humans = np.arange(len(agents))
     prediction = np.asarray(predictor.rollout(history, mask, None, humans, horizon=config.pred_len))
     expected = (config.pred_len, len(agents), 2)
@@ -91,10 +96,30 @@ def check_finite(predictor: Predictor, positions: np.ndarray, what: str) -> None
         )
 
 
-def observed_history(xy: np.ndarray, obs_len: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(history, mask, agents)`` of a scene ``(T, N, 2)`` (NaN = absent): its first ``obs_len`` steps of the
-    agents observed in them (``agents``, the primary first), absent entries 0 with ``mask`` False."""
-    observed = xy[:obs_len]
+def handed_steps(predictor: Predictor, obs_len: int) -> int:
+    """How many of a scene's ``obs_len`` observed steps ``predictor`` is given, the last ones.
+
+    A ``LearnedPredictor`` reads the last ``predictor.obs_len`` rows of a history and refuses an agent
+    unseen in them: a zoo entry whose config reads 3 steps stopped at the first scene with a neighbour that
+    left before them. It is given those rows alone, as the closed loop gives it (``predictor_history``) and as
+    TrajNet++'s baselines give a model ``xy[start_length:obs_length]`` of the 9 observed steps. Any other
+    predictor keeps every observed step: constant velocity (obs_len 2) reads them all, extrapolating a
+    neighbour last seen earlier, and its scores stay what they were.
+    """
+    learned = sys.modules.get("predictors.learned")  # not imported: no LearnedPredictor exists (nor torch)
+    if learned is not None and isinstance(predictor, learned.LearnedPredictor):
+        return min(predictor.obs_len, obs_len)  # more than obs_len: refused by evaluate_scenes first
+    return obs_len
+
+
+def observed_history(
+    xy: np.ndarray, obs_len: int, steps: int | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(history, mask, agents)`` of a scene ``(T, N, 2)`` (NaN = absent): the last ``steps`` (default: all)
+    of its first ``obs_len`` steps, of the agents observed in them (``agents``, the primary first), absent
+    entries 0 with ``mask`` False."""
+    steps = obs_len if steps is None else steps
+    observed = xy[obs_len - steps : obs_len]
     seen = ~np.isnan(observed).any(axis=-1)
     agents = np.flatnonzero(seen.any(axis=0))  # an agent that only appears later cannot be predicted
     mask = seen[:, agents]
@@ -194,6 +219,7 @@ def evaluate_scenes(
     return {
         "predictor": predictor.name,
         "obs_len": config.obs_len,
+        "steps_given": handed_steps(predictor, config.obs_len),
         "pred_len": config.pred_len,
         "top_k": config.top_k if config.top_k is not None and hasattr(predictor, "sample") else None,
         "files": per_file,
@@ -216,7 +242,7 @@ def format_table(result: dict) -> str:
             str(m["scenes"]),
             f"{m['ade']:.3f}",
             f"{m['fde']:.3f}",
-            "n/a" if m["col_i"] is None else f"{m['col_i']:.2f}",
+            _col_i_cell(m),
             f"{m['col_ii']:.2f}",
         ]
         if topk:
@@ -226,8 +252,31 @@ def format_table(result: dict) -> str:
     rows = [row(name, m) for name, m in result["files"].items()]
     if len(result["files"]) > 1:
         rows.append(row("overall", result["overall"]))
+    given, observed = result.get("steps_given", result["obs_len"]), result["obs_len"]
+    window = f"the last {given} of {observed}" if given < observed else f"{observed}"
     title = (
-        f"{result['predictor']}: {result['obs_len']} observed -> {result['pred_len']} predicted steps "
+        f"{result['predictor']}: {window} observed -> {result['pred_len']} predicted steps "
         "(TrajNet++ metrics, primary pedestrian)"
     )
-    return "\n".join([title, *aligned_lines(header, rows)])
+    return "\n".join([title, *aligned_lines(header, rows), *_col_i_footnote(result, given)])
+
+
+def _col_i_cell(metrics: dict) -> str:
+    """Col-I, starred where it counts fewer scenes than the other columns (``_col_i_footnote``)."""
+    if metrics["col_i"] is None:
+        return "n/a"
+    return f"{metrics['col_i']:.2f}" + ("*" if metrics["col_i_scenes"] < metrics["scenes"] else "")
+
+
+def _col_i_footnote(result: dict, given: int) -> list[str]:
+    """The line under the table that says what a starred Col-I counts: only the scenes whose every neighbour
+    seen in the observed steps is in the last ``given`` ones, which the predictor reads and predicts."""
+    if not any(m["scenes"] and m["col_i_scenes"] < m["scenes"] for m in result["files"].values()):
+        return []
+    overall = result["overall"]
+    return [
+        f"* Col-I of {overall['col_i_scenes']} of {overall['scenes']} scenes: those whose every neighbour "
+        f"seen in the {result['obs_len']} observed steps is in the last {given}, which "
+        f"{result['predictor']} reads (its config's obs_len) and predicts; ADE, FDE and Col-II are of every "
+        "scene and neighbour"
+    ]

@@ -37,6 +37,10 @@ metrics (TrajNet++'s, of each scene's primary pedestrian; data/README.md):
   ADE, FDE     average and final displacement error over the 12 predicted steps, m
   Col-I        % of scenes where the primary's prediction collides with a neighbour's prediction
   Col-II       % of scenes where it collides with a neighbour's true path
+
+A zoo model whose config reads fewer observed steps (obs_len 3) is given the last 3 of the 9 and the people
+seen in them, as TrajNet++'s baselines give such a model; its Col-I then counts only the scenes whose every
+neighbour seen in the 9 steps it predicted (starred, and said under the table).
 """
 
 
