@@ -23,7 +23,7 @@ except ImportError:  # pragma: no cover
     fcntl = None  # type: ignore[assignment]
 
 # The files of the cache, and the only ones cache_admin.clear removes: <key>.casadi, <key>.<tag>.so (its
-# library), <key>.record, <key>.lock, and what an interrupted compile leaves (<key>.<tag>.o,
+# library), <key>.record, <key>.lock, and what a compile killed by SIGKILL leaves (<key>.<tag>.o,
 # .tmp-<key>.<tag>.casadi and .record, crowdmpc_jit_<tag>.c: the generated source).
 _KEY = r"[0-9a-f]{64}"
 _TAG = r"\d+_[0-9a-f]{8}"  # <pid>_<random>: the compiling process's

@@ -64,7 +64,7 @@ from mpc.cache_entries import (
     publish,
     remove_dead_leftovers,
 )
-from mpc.compiler import COMPILER, Compiler, compiler, interruptible
+from mpc.compiler import COMPILER, Check, Compiler, compiler, ended_after_cleanup, interruptible
 from mpc.errors import MPCConfigError
 
 # The variable and default of predictors.data.locate.cache_root, repeated here: importing predictors would
@@ -312,8 +312,9 @@ def _compile_locked(
         remove_dead_leftovers(folder)  # what killed compiles left an hour ago (nothing else removes it)
         # before gcc runs: on a full disk it printed its own errors (a source cut short) above the CLI's line
         _room_for_a_compile(folder)
-        try:
-            _compile_nlpsol(name, plugin, nlp, options, cc, folder, key)
+        try:  # a SIGTERM while it compiles ends the process once the compile's files are gone
+            with ended_after_cleanup() as ended:
+                _compile_nlpsol(name, plugin, nlp, options, cc, folder, key, ended)
         except CompileCacheError:
             raise
         except RuntimeError as exc:  # CasADi's: code generation or gcc failed
@@ -342,7 +343,7 @@ def _last_line(exc: BaseException) -> str:
 
 
 def _compile_nlpsol(
-    name: str, plugin: str, nlp: Mapping, options: Mapping, cc: Compiler, folder: Path, key: str
+    name: str, plugin: str, nlp: Mapping, options: Mapping, cc: Compiler, folder: Path, key: str, ended: Check
 ) -> None:
     tag = f"{os.getpid()}_{secrets.token_hex(4)}"
     library = f"{key}.{tag}"
@@ -383,6 +384,8 @@ def _compile_nlpsol(
                     raise KeyboardInterrupt from None
                 # CasADi's "Tried <command>" names gcc, as the user would run it, not our shell around it
                 raise RuntimeError(str(exc).replace(command, shlex.quote(cc.path))) from None
+            finally:
+                ended()  # a SIGTERM noted while gcc ran (ended_after_cleanup): stop here, the files go below
         solver.save(str(tmp))
         del solver
         record.write_text(entry_record(tmp, folder / f"{library}.so"), encoding="utf-8")
@@ -390,11 +393,8 @@ def _compile_nlpsol(
         # to another compile (no flock) leaves our record beside its manifest: unloadable, compiled again.
         os.replace(record, folder / f"{key}.record")
         published = publish(tmp, folder / f"{key}.casadi")
-    finally:
-        source.unlink(missing_ok=True)
-        interrupted.unlink(missing_ok=True)
-        (folder / f"{library}.o").unlink(missing_ok=True)
-        tmp.unlink(missing_ok=True)
-        record.unlink(missing_ok=True)
+    finally:  # a compile's own files, interrupted or not (another process's have another tag)
+        for own in (source, interrupted, folder / f"{library}.o", tmp, record):
+            own.unlink(missing_ok=True)
         if not published:  # failed, or another process published first (no lock): its library is used
             (folder / f"{library}.so").unlink(missing_ok=True)

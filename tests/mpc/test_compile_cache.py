@@ -468,6 +468,56 @@ def test_ctrl_c_during_a_cold_compile_interrupts_the_program(cache, tmp_path, si
     assert suffixes(cache) == []
 
 
+TERMINATED = """
+import sys
+sys.path.insert(0, {root!r})
+from mpc import compile_cache
+from tests.mpc.test_compile_cache import IPOPT, small_nlp
+compile_cache.compiler = lambda: compile_cache.Compiler({gcc!r}, "x", ("-O2",))
+compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+"""
+
+
+@pytest.mark.parametrize("group", [False, True], ids=["process", "process-group"])
+def test_a_compile_ended_by_sigterm_removes_its_files_and_ends_by_it(cache, tmp_path, group):
+    """A sweep's worker gets SIGTERM from the driver's stop (`kill`, `timeout`; a job scheduler signals the
+    whole group, gcc too): its default action ended the process with no finally run, leaving the generated
+    source and the object file gcc, running on, wrote after it; only a compile an hour later removed them.
+    Now the compile ends first and removes its files, and the process still ends by SIGTERM (-15)."""
+    started = tmp_path / "started"
+    body = f'for a; do [ "$o" = 1 ] && out=$a; o=; [ "$a" = -o ] && o=1; done; : > {started}; sleep 1'
+    slow = fake_compiler(tmp_path, f'{body}; : > "$out"')  # an object file, then a library, each a second
+    script = tmp_path / "child.py"
+    script.write_text(textwrap.dedent(TERMINATED.format(root=str(ROOT), gcc=slow.path)))
+    env = os.environ | {compile_cache.CACHE_ENV: str(cache.parent)}
+    child = subprocess.Popen([sys.executable, str(script)], env=env, start_new_session=True)
+    for _ in range(2400):  # up to 2 min to reach the compile on a loaded host
+        if started.exists() or child.poll() is not None:
+            break
+        time.sleep(0.05)
+    (os.killpg if group else os.kill)(child.pid, signal.SIGTERM)
+    assert child.wait(timeout=60) == -signal.SIGTERM
+    time.sleep(1.5)  # a gcc that outlived its parent would write its output by now
+    assert suffixes(cache) == []
+
+
+def test_a_compile_leaves_a_programs_own_sigterm_handler(cache, monkeypatch, tmp_path):
+    """Only a default action is taken over during a compile, and it is back after: the CLI's
+    terminate_as_interrupt (and any program's handler) keeps the signal."""
+    failing = fake_compiler(tmp_path, "exit 1")
+    monkeypatch.setattr(compile_cache, "compiler", lambda: failing)
+    own = lambda signum, frame: None  # noqa: E731
+    for handler in (own, signal.SIG_DFL, signal.SIG_IGN):
+        saved = signal.signal(signal.SIGTERM, handler)
+        try:
+            with pytest.raises(compile_cache.CompileCacheError):
+                compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+            assert signal.getsignal(signal.SIGTERM) is handler
+        finally:
+            signal.signal(signal.SIGTERM, saved)
+    assert suffixes(cache) == []
+
+
 @needs_gcc
 def test_the_generated_source_is_written_in_the_cache_not_the_working_directory(cache, monkeypatch):
     """CasADi writes <jit_name>.c into the working directory: during the compile that is the cache folder,
