@@ -342,7 +342,7 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path, last: Path | N
     stops a diverged fit, and the run's clock; ``last``: the checkpoint a resume starts from."""
     import lightning as L
     from lightning.pytorch.callbacks import EarlyStopping, LearningRateMonitor
-    from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
+    from lightning.pytorch.loggers import TensorBoardLogger
 
     from pipelines.commands.train_checkpoint import (
         RunCheckpoint,
@@ -350,6 +350,7 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path, last: Path | N
         StopOnDivergence,
         TrainingClock,
         WholeCheckpointIO,
+        WholeCSVLogger,
         epochs_to_fit,
         progress_callbacks,
     )
@@ -378,7 +379,7 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path, last: Path | N
         accelerator="cpu",
         devices=1,
         logger=[
-            CSVLogger(out, name="csv"),
+            WholeCSVLogger(out, name="csv"),
             TensorBoardLogger(out, name="tensorboard", default_hp_metric=False),
         ],
         # the step schedule's rate each epoch (lr-Adam in metrics.csv and TensorBoard), as Lightning logs it

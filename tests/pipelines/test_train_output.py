@@ -32,3 +32,40 @@ def test_a_trained_net_refused_as_a_predictor_leaves_no_weights_in_out(tmp_path,
     assert line.startswith("crowdmpc train: error: ") and "encode's out holds NaN or inf" in line
     left = {p.name for p in (tmp_path / "run").iterdir()}
     assert left == {"checkpoints", "csv", "tensorboard", "train_settings.json"}
+
+
+def test_metrics_csv_survives_a_failure_while_a_new_column_rewrites_it(tmp_path, capsys, monkeypatch):
+    """Lightning rewrote metrics.csv in place (truncated, then written) whenever a column first came: at the
+    fifth step, and at the first epoch's end for the validation metrics and epoch_time_s. A kill -9 or a
+    full disk in that rewrite lost every row before; now the rewrite is a new file renamed over the old,
+    and a failure in it leaves the old file whole (and a run's file as Lightning wrote it)."""
+    import csv
+    import errno
+
+    walk = str(write_walk_file(tmp_path / "walk.ndjson"))
+    argv = ["train", "--model", "vanilla_lstm", "--train", walk, "--val", walk, "--epochs", "3"]
+    argv += ["--batch-size", "1", "--no-progress"]  # 2 steps an epoch: train_loss first comes in the third
+    code, _, err = run_cli(capsys, *argv, "--out", str(tmp_path / "whole"))
+    assert code == 0, err
+    (whole,) = (tmp_path / "whole" / "csv").glob("version_*/metrics.csv")
+    rows = list(csv.DictReader(whole.open(newline="")))
+    assert [r["step"] for r in rows[:2]] == ["0", "1"] and len(rows) == 10, whole.read_text()
+    assert list(rows[0]) == [
+        "epoch", "epoch_time_s", "lr-Adam", "step", "train_loss", "train_loss_epoch", "val_ade", "val_fde",
+        "val_loss",
+    ]  # fmt: skip
+    headers = []
+    writeheader = csv.DictWriter.writeheader
+
+    def full_disk(self):  # the file's creation, its first rewrite (val_*), then the disk is full
+        headers.append(list(self.fieldnames))
+        if len(headers) == 3:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return writeheader(self)
+
+    monkeypatch.setattr(csv.DictWriter, "writeheader", full_disk)
+    code, _, err = run_cli(capsys, *argv, "--out", str(tmp_path / "full"))
+    assert code != 0 and "epoch_time_s" in headers[2], headers
+    (kept,) = (tmp_path / "full" / "csv").glob("version_*/metrics.csv")
+    # the rows of the first epoch, lr-Adam's at step 0 and the validation's at step 1, are still there
+    assert [r.get("step") for r in csv.DictReader(kept.open(newline=""))][:2] == ["0", "1"], kept.read_text()
