@@ -1,7 +1,8 @@
 """The sweep's Markdown table, laid out like the paper's Tables II/III, and the paired comparison it prints.
 
 One column per method and number of pedestrians, the four metrics as rows, the paper's figure under each of
-ours, and the better method of each group in bold (as the paper prints it). Success is also compared pairwise
+ours, and the better method of each group in bold (as the paper prints it); past ``MAX_CELL_COLUMNS`` cells,
+a row per cell and the metrics as columns. Success is also compared pairwise
 on the crowds both methods ran (the same scenarios and seeds), with the exact McNemar test.
 """
 
@@ -18,6 +19,13 @@ from pipelines.experiments import safety_report as safety
 from pipelines.experiments.cells import EXPERIMENTS, Experiment
 from pipelines.experiments.summary import CellSummary, Rate
 from pipelines.experiments.tasks import SCENARIOS
+
+# Past this many cells table.md has a row per cell and a column per metric: a column per cell (the paper's
+# layout) made a 100-cell sweep's table 101 columns wide, a row of 101 texts no reader follows. Every shipped
+# experiment at its own sizes keeps the paper's layout (Tables II and III: 10 cells; safety, the widest: 16).
+MAX_CELL_COLUMNS: Final[int] = 16
+PAPER_ROW: Final[str] = "&nbsp;&nbsp;paper"  # the paper's figure, under ours
+Row = tuple[str, list[str]]  # a metric's label and its text in each cell
 
 
 def mcnemar_exact(b: int, c: int) -> float:
@@ -191,20 +199,40 @@ def markdown_table(experiment: Experiment, summaries: Sequence[CellSummary]) -> 
     for s in summaries:
         groups.setdefault(s.cell.n_humans, []).append(s)
     columns = [s for n in sorted(groups) for s in groups[n]]
-    lines = [
-        "| Metrics \\ Methods | " + " | ".join(s.cell.method for s in columns) + " |",
-        "|---|" + "---|" * len(columns),
-        "| Numbers of pedestrians | " + " | ".join(str(s.cell.n_humans) for s in columns) + " |",
-    ]
+    rows: list[Row] = [("Numbers of pedestrians", [str(s.cell.n_humans) for s in columns])]
     world_line, worlds = safety.world_note([s.cell for s in columns])
     if worlds:
-        lines.append(f"| {safety.world_row_label([s.cell for s in columns])} | " + " | ".join(worlds) + " |")
-    lines += _metric_rows(groups, columns)
-    lines += _detail_rows(groups, columns)
-    return _table_notes(experiment, columns, world_line) + "\n\n" + "\n".join(lines) + "\n"
+        rows.append((safety.world_row_label([s.cell for s in columns]), worlds))
+    rows += _metric_rows(groups, columns)
+    rows += _detail_rows(groups, columns)
+    notes = _table_notes(experiment, columns, world_line)
+    methods = [s.cell.method for s in columns]
+    if len(columns) > MAX_CELL_COLUMNS:
+        return notes + "\n" + _transposed_note(len(columns)) + "\n\n" + _transposed(methods, rows)
+    lines = [_line("Metrics \\ Methods", methods), "|---|" + "---|" * len(columns)]
+    return notes + "\n\n" + "\n".join(lines + [_line(label, texts) for label, texts in rows]) + "\n"
 
 
-def _row(label: str, texts: Sequence[str]) -> str:
+def _transposed_note(cells: int) -> str:
+    return (
+        f"A row per cell ({cells} cells, too many for a column each past {MAX_CELL_COLUMNS}): rows and "
+        "columns are swapped, what these notes call a column is a row of the table and a row a column, the "
+        "paper's figure in the column after ours."
+    )
+
+
+def _transposed(methods: list[str], rows: list[Row]) -> str:
+    """``rows`` (a label, a text per cell) as a table of a row per cell, the labels heading its columns; the
+    paper's figure is headed by its metric's label."""
+    labels = [
+        f"{rows[i - 1][0]}, paper" if label == PAPER_ROW else label for i, (label, _) in enumerate(rows)
+    ]
+    lines = [_line("Methods", labels), "|---|" + "---|" * len(labels)]
+    lines += [_line(method, [texts[j] for _, texts in rows]) for j, method in enumerate(methods)]
+    return "\n".join(lines) + "\n"
+
+
+def _line(label: str, texts: Sequence[str]) -> str:
     return f"| {label} | " + " | ".join(texts) + " |"
 
 
@@ -226,7 +254,7 @@ def _bolded(
     return [f"**{text}**" if i in bold else text for i, text in enumerate(texts)]
 
 
-def _metric_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary]) -> list[str]:
+def _metric_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary]) -> list[Row]:
     """The paper's four metrics: ours with their intervals, and the paper's figures under each when it has
     them, the better method of each group in bold."""
     has_paper = any(s.paper for s in columns)
@@ -236,7 +264,7 @@ def _metric_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary
         ("Collision rate (%)", "collision", False),
         ("Discomfort rate (%)", "discomfort", False),
     )
-    lines = []
+    lines: list[Row] = []
     for label, name, higher in metric_rows:
         if name == "travel_time":
             values = [s.travel_time_mean for s in columns]
@@ -251,11 +279,11 @@ def _metric_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary
             rates: list[Rate] = [getattr(s, name) for s in columns]
             values = [r.percent for r in rates]
             texts = [_rate_cell(r) for r in rates]
-        lines.append(_row(label, _bolded(groups, columns, texts, values, higher)))
+        lines.append((label, _bolded(groups, columns, texts, values, higher)))
         if has_paper:
             pv = [getattr(s.paper, name) if s.paper else math.nan for s in columns]
             paper = _bolded(groups, columns, [_fmt(v) for v in pv], pv, higher)
-            lines.append(_row("&nbsp;&nbsp;paper", paper))
+            lines.append((PAPER_ROW, paper))
     return lines
 
 
@@ -276,40 +304,40 @@ def _paired_texts(groups: dict[int, list[CellSummary]], columns: list[CellSummar
     return paired
 
 
-def _detail_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary]) -> list[str]:
+def _detail_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary]) -> list[Row]:
     """What the paper does not print: contact, robots touching each other, collisions and robot contact
     between steps, per-step collisions, closest approach, success per scenario, the paired comparison,
     and what the controller cost."""
     return [
-        _row("Contact rate (%) (< 0.6 m)", [_rate_cell(s.contact) for s in columns]),
-        _row(
+        ("Contact rate (%) (< 0.6 m)", [_rate_cell(s.contact) for s in columns]),
+        (
             "Robot-robot contact rate (%) (< 0.6 m; not in the paper)",
             [_added_rate_cell(s, "robot_contact") for s in columns],
         ),
         # straight motion within each step (crowdsim.metrics): a crossing the 0.4 s states step over
-        _row(
+        (
             "Collision between steps (%) (not in the paper)",
             [_added_rate_cell(s, "collision_between_steps") for s in columns],
         ),
-        _row(
+        (
             "Robot-robot contact between steps (%)",
             [_added_rate_cell(s, "robot_contact_between_steps") for s in columns],
         ),
-        _row("Collision per step (%)", [_fmt(s.collision_step_freq, 2) for s in columns]),
-        _row("Min robot-human distance, median (m)", [_fmt(s.min_distance_median, 2) for s in columns]),
-        _row(
+        ("Collision per step (%)", [_fmt(s.collision_step_freq, 2) for s in columns]),
+        ("Min robot-human distance, median (m)", [_fmt(s.min_distance_median, 2) for s in columns]),
+        (
             "Success circle / perpendicular (%)",
             # one decimal as every rate here: without, 199 of 200 read "100", a scenario without a failure
             [" / ".join(_fmt(s.success_by_scenario[sc].percent) for sc in SCENARIOS) for s in columns],
         ),
-        _row("Success, paired with the group's first method", _paired_texts(groups, columns)),
-        _row("Episodes", [str(s.episodes) for s in columns]),
-        _row(
+        ("Success, paired with the group's first method", _paired_texts(groups, columns)),
+        ("Episodes", [str(s.episodes) for s in columns]),
+        (
             STEP_TIME_LABEL,
             [f"{_fmt(s.step_median_ms, 2)} / {_fmt(s.step_p95_ms, 2)}" for s in columns],
         ),
-        _row("IBR iterations per step (mean)", [_solver_fmt(s, s.iterations_mean) for s in columns]),
-        _row("Fallback steps (%)", [_solver_fmt(s, s.fallback_step_rate) for s in columns]),
+        ("IBR iterations per step (mean)", [_solver_fmt(s, s.iterations_mean) for s in columns]),
+        ("Fallback steps (%)", [_solver_fmt(s, s.fallback_step_rate) for s in columns]),
     ]
 
 
