@@ -5,7 +5,7 @@ and DMPC with ``--predictor``, default constant velocity), ``--episodes`` episod
 ``--humans`` humans (default 7) under the paper profile: episode ``i`` runs scenario ``circle`` for even
 ``i`` and ``perpendicular`` for odd ``i`` (``--scenarios`` to change), seed ``--seed + i``. The robots stand
 in ``--formation`` (default: the config's ``[env] formation``, else ``auto``,
-crowdsim.scenarios.choose_formation); episode ``i`` is ``CrowdEnv(EnvConfig(formation=...)).reset(seed,
+crowdsim.formations.choose_formation); episode ``i`` is ``CrowdEnv(EnvConfig(formation=...)).reset(seed,
 scenario, humans, M)`` under the paper profile. ``--formation row`` gives the first layout (1 m row, goals
 10 m north) for a before/after comparison.
 
@@ -52,9 +52,10 @@ import numpy as np
 
 from crowdsim.env import CrowdEnv
 from crowdsim.errors import SimulationError
+from crowdsim.formations import FORMATIONS, Formation, choose_formation
 from crowdsim.metrics import EpisodeMetrics, Trajectory, aggregate, episode_metrics
 from crowdsim.profiles import make_env_config
-from crowdsim.scenarios import FORMATIONS, SCENARIOS, Formation, choose_formation
+from crowdsim.scenarios import SCENARIOS
 from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment
 from pipelines.config import ConfigError, load
 from pipelines.errors import PipelineError

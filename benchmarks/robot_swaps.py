@@ -34,7 +34,8 @@ import numpy as np
 import crowdsim
 from crowdsim.crossings import place_humans_paper
 from crowdsim.env_config import EnvConfig
-from crowdsim.scenarios import MAX_TRIES, SCENARIOS, Layout, antipodal_circle, geometry_scale
+from crowdsim.formations import antipodal_circle
+from crowdsim.scenarios import MAX_TRIES, SCENARIOS, Layout, geometry_scale
 from pipelines.config import ConfigError, load
 from pipelines.errors import FlockWarning, PipelineError
 from pipelines.loop.controllers import ControllerSpec, make_controller

@@ -24,9 +24,9 @@ from crowdsim.conventions import (
     SuccessRule,
 )
 from crowdsim.errors import SimulationError, got, real_number
+from crowdsim.formations import FORMATIONS, Formation, check_spacing
 from crowdsim.orca import OrcaParams
 from crowdsim.replay import CROWDS, RECORDED_DT
-from crowdsim.scenarios import FORMATIONS, Formation, check_spacing
 from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment
 from crowdsim.world import (
     A_MAX,
@@ -81,7 +81,7 @@ class EnvConfig:
     success_rule: SuccessRule = "simultaneous"  # crowdsim.env's docstring
     robots_visible: bool = True  # the humans' ORCA sees the robots
     goal_assignment: GoalAssignment = "fixed"  # "fixed": robot i to goal i (paper); "slots": crowdsim.slots
-    # the robots' starts and goals (crowdsim.scenarios): "auto" is the paper's row up to 3 robots, a wedge
+    # the robots' starts and goals (crowdsim.formations): "auto" is the paper's row up to 3 robots, a wedge
     # from 4; "row", "wedge", "two_rows" choose one for every team size; "antipodal": robots trading places
     formation: Formation = "auto"
     # m between neighbouring robots (and their goals); None: the formation's own, 1 m in the row, d_ij in

@@ -12,7 +12,8 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 
 from crowdsim.errors import LayoutWarning, SimulationError
-from crowdsim.scenarios import Layout, check_robot_spacing, check_sizes, checked_layout, robot_layout
+from crowdsim.formations import check_robot_spacing, robot_layout
+from crowdsim.scenarios import Layout, check_sizes, checked_layout
 
 if TYPE_CHECKING:
     from crowdsim.env_config import EnvConfig

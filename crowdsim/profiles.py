@@ -12,7 +12,7 @@
   once. Only its history is longer (9 rows, ``world.OBS_LEN``, where the first simulator kept 8), which
   changes the episodes of a network predictor (docs/results.md, Table III).
 
-Where the robots start and end is not public; both profiles keep ``crowdsim.scenarios.robot_layout``'s
+Where the robots start and end is not public; both profiles keep ``crowdsim.formations.robot_layout``'s
 formation (the row up to 3 robots), which isolates the published conventions. Visibility is chosen
 separately (``make_env_config``); CrowdNav's own default is invisible robots, the fork's configuration
 visible ones.

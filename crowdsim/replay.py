@@ -10,7 +10,7 @@ yield to the robots as ORCA's humans do (crowdsim.reaction).
 
 A ``Recording`` is a sequence's tracks on its time grid, NaN where a pedestrian is not tracked. An episode
 (``replay_episode``) takes a window of it as long as the episode may last, moved and turned so that the
-robots' usual task (``crowdsim.scenarios.robot_layout``: from y = -5 m to y = +5 m around x = 0) crosses the
+robots' usual task (``crowdsim.formations.robot_layout``: from y = -5 m to y = +5 m around x = 0) crosses the
 recording's centre (the median tracked position) and meets its main flow (the principal axis of the
 pedestrians' steps): across it in the "perpendicular" scenario, along it (head-on with half the people,
 behind the others) in "circle". Of the pedestrians tracked in the window's first ``SELECT_S`` seconds, the
@@ -41,7 +41,7 @@ from typing import Final
 import numpy as np
 
 from crowdsim.errors import SimulationError
-from crowdsim.scenarios import Formation, robot_layout
+from crowdsim.formations import Formation, robot_layout
 
 # The BIWI EWAP sequences seq_eth and seq_hotel, whole or their last 20 % of frames alone: the TrajNet++ test
 # split, which no shipped net was trained or validated on (pipelines.loop.replay_data)

@@ -2,7 +2,7 @@
 may not do what was meant: robots trading places whom every pair flocking holds together
 (``separate_goals_note``), a flock larger than the paper's under its per-pair weight (``flock_note``), a
 d_min that leaves robots no room at their goals (``goal_room_note``), robots smaller than the MPC's parking
-(``radius_note``). Each reads the formation's own layout (``crowdsim.scenarios.robot_layout``), which every
+(``radius_note``). Each reads the formation's own layout (``crowdsim.formations.robot_layout``), which every
 episode of a run moves rigidly (slots keep it: their matching of least squared distance is the identity)."""
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ def goal_room_note(
     above d_min, with flock_distance "goals" where that spacing passes d_flock. Goals with room but further
     apart than d_flock by more than ``FLOCK_SLACK`` get the flocking line instead (Eq. 15 pulls the pair
     together)."""
-    from crowdsim.scenarios import MAX_ROBOT_SPACING
+    from crowdsim.formations import MAX_ROBOT_SPACING
     from pipelines.loop.mpc_setup import mpc_config
 
     if spec.controller not in MPC_CONTROLLERS or n_robots < 2:
@@ -87,7 +87,7 @@ def goal_room_note(
 def _closest_goals(n_robots: int, formation: str, spacing: float | None) -> tuple[str, float]:
     """The formation ``formation`` stands for (``auto``: by the team's size) and the distance, m, between
     its two closest goals at ``spacing`` (None: the formation's own)."""
-    from crowdsim.scenarios import choose_formation
+    from crowdsim.formations import choose_formation
 
     shape = choose_formation(n_robots) if formation == "auto" else formation
     goals = _layout(n_robots, shape, spacing)[1]
@@ -182,6 +182,6 @@ def separate_goals_note(
 def _layout(n_robots: int, formation: str, spacing: float | None) -> tuple[np.ndarray, np.ndarray]:
     """``robot_layout``'s starts and goals of ``formation`` (``auto``: by the team's size) at ``spacing``
     (None: the formation's own), which the run's EnvConfig has checked."""
-    from crowdsim.scenarios import robot_layout
+    from crowdsim.formations import robot_layout
 
     return robot_layout(n_robots, formation, spacing=spacing)  # type: ignore[arg-type]  # checked

@@ -8,7 +8,8 @@ import pytest
 from crowdsim.env import CrowdEnv
 from crowdsim.env_config import EnvConfig
 from crowdsim.errors import SimulationError
-from crowdsim.scenarios import make_layout, robot_layout
+from crowdsim.formations import robot_layout
+from crowdsim.scenarios import make_layout
 from pipelines.cli import main
 
 

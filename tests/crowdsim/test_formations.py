@@ -8,15 +8,8 @@ import pytest
 
 from crowdsim import world
 from crowdsim.errors import SimulationError
-from crowdsim.scenarios import (
-    FORMATIONS,
-    MAX_ROBOTS,
-    ROBOT_SPACING,
-    choose_formation,
-    make_layout,
-    rank_sizes,
-    robot_layout,
-)
+from crowdsim.formations import FORMATIONS, ROBOT_SPACING, choose_formation, rank_sizes, robot_layout
+from crowdsim.scenarios import MAX_ROBOTS, make_layout
 from mpc.config import MPCConfig
 
 TABLE_I = MPCConfig()
@@ -258,3 +251,12 @@ def test_people_are_placed_clear_of_robots_trading_places(scenario, m):
             layout = make_layout(scenario, n_humans, m, np.random.default_rng(seed), formation="antipodal")
             gaps = np.linalg.norm(layout.human_starts[:, None] - layout.robot_starts[None], axis=-1)
             assert gaps.min() >= 1.1, (n_humans, seed)
+
+
+def test_the_formations_stay_importable_from_scenarios():
+    """They lived in crowdsim.scenarios before crowdsim.formations: code written then still imports them."""
+    import crowdsim.formations as formations
+    import crowdsim.scenarios as scenarios
+
+    for name in ("Formation", "FORMATIONS", "choose_formation", "robot_layout"):
+        assert getattr(scenarios, name) is getattr(formations, name), name

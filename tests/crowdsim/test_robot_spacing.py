@@ -12,7 +12,7 @@ import pytest
 from crowdsim.env import CrowdEnv
 from crowdsim.env_config import EnvConfig
 from crowdsim.errors import SimulationError
-from crowdsim.scenarios import robot_layout
+from crowdsim.formations import robot_layout
 from tests.cli_calls import one_line
 from tests.cli_calls import run_cli as run
 
@@ -63,8 +63,9 @@ def test_the_command_line_takes_it_and_refuses_a_bad_one(tmp_path, capsys):
 def test_the_widest_spacing_stays_inside_the_gym_observations_bounds():
     """The gymnasium array clips coordinates at ``scene_bound``, which held the formations at their own
     spacing: a wider spacing must not put a start or goal outside it."""
+    from crowdsim.formations import FORMATIONS, MAX_ROBOT_SPACING
     from crowdsim.gym_observation import scene_bound
-    from crowdsim.scenarios import FORMATIONS, MAX_ROBOT_SPACING, MAX_ROBOTS
+    from crowdsim.scenarios import MAX_ROBOTS
     from crowdsim.world import V_PREF
 
     for formation in FORMATIONS:

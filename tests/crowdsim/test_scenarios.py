@@ -5,7 +5,8 @@ import pytest
 
 import crowdsim.scenarios as scenarios
 from crowdsim.errors import SimulationError
-from crowdsim.scenarios import make_layout, robot_layout
+from crowdsim.formations import robot_layout
+from crowdsim.scenarios import make_layout
 
 
 def test_robot_row_three_robots_and_twelve():
