@@ -41,10 +41,10 @@ A controller must be handed the tracked ones alone, as the closed loop does (pip
 reactive replays ("eth_reactive", ..., crowdsim.reaction) bend the tracks where ORCA has a person yield to a
 robot (with ``robots_visible``; unseen robots leave the plain replay).
 
-This module holds the simulator (``CrowdEnv``); what a controller sees (``Observation``) is
-crowdsim.observation, its settings (``EnvConfig`` and the bounds it checks) crowdsim.env_config; both are
-importable from here too, as ``CrowdEnv``'s argument and answer: plugins and pipelines.config take them from
-here.
+This module holds the simulator (``CrowdEnv``); the humans' steps 1 and 3 are crowdsim.human_motion, what
+a controller sees (``Observation``) crowdsim.observation, its settings (``EnvConfig`` and the bounds it
+checks) crowdsim.env_config; the last two are importable from here too, as ``CrowdEnv``'s argument and
+answer: plugins and pipelines.config take them from here.
 """
 
 from __future__ import annotations
@@ -57,10 +57,9 @@ import numpy as np
 
 from crowdsim.env_config import EnvConfig
 from crowdsim.errors import LayoutWarning, SimulationError
+from crowdsim.human_motion import humans_next
 from crowdsim.metrics import Trajectory
 from crowdsim.observation import Observation
-from crowdsim.orca import orca_velocities, preferred_velocities
-from crowdsim.reaction import reactive_step, reacts
 from crowdsim.replay import REPLAYED, Recording, ReplayEpisode, recorded, replay_episode
 from crowdsim.scenarios import (
     Layout,
@@ -234,7 +233,8 @@ class CrowdEnv:
                 f"with {int((~np.isfinite(a)).sum())} non-finite entries"
             )
 
-        hp_new, hv_new, lp3 = self._humans_next()
+        robots, humans = (self._rp, self._rv), (self._hp, self._hv, self._hg)
+        hp_new, hv_new, lp3 = humans_next(cfg, self._replay, self._step, robots, humans)
 
         # Robots: clip the acceleration so that |a| <= a_max and |v + dt a| <= v_max, per component.
         lo = np.maximum(-cfg.a_max, (-cfg.v_max - self._rv) / cfg.dt)
@@ -294,51 +294,6 @@ class CrowdEnv:
         )
 
     # ---- internals ---------------------------------------------------------------------------------------
-
-    def _humans_next(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The humans' positions and velocities one step on, decided from the current state of everyone
-        (before any agent moves), and which humans' ORCA linear program was infeasible."""
-        cfg = self.config
-        if self._replay is None:
-            velocities, lp3 = self._orca_velocities()
-            return self._hp + cfg.dt * velocities, velocities, lp3
-        row = self._replay.past + self._step
-        if reacts(cfg.crowd) and cfg.robots_visible:
-            return reactive_step(
-                self._replay,
-                row,
-                self._hp,
-                self._hv,
-                self._rp,
-                self._rv,
-                radius=cfg.radius + cfg.orca_radius_margin,
-                params=cfg.orca,
-                dt=cfg.dt,
-            )
-        # real tracks played back, where the recording has them (its step, not dt times a rounded velocity)
-        return self._replay.positions[row + 1], self._replay.velocities[row + 1], np.zeros(0, dtype=bool)
-
-    def _orca_velocities(self) -> tuple[np.ndarray, np.ndarray]:
-        """Every human's ORCA velocity, decided from the current state of everyone it sees (before any
-        agent moves), and which humans' linear program was infeasible."""
-        cfg, m = self.config, len(self._rp)
-        if cfg.robots_visible:
-            positions = np.concatenate([self._rp, self._hp])
-            velocities = np.concatenate([self._rv, self._hv])
-            humans = np.arange(m, m + len(self._hp))
-        else:
-            positions, velocities, humans = self._hp, self._hv, np.arange(len(self._hp))
-        pref = preferred_velocities(self._hp, self._hg, cfg.v_pref, stop_radius=cfg.radius)
-        return orca_velocities(
-            positions,
-            velocities,
-            pref,
-            cfg.radius + cfg.orca_radius_margin,
-            cfg.v_pref,
-            cfg.orca,
-            cfg.dt,
-            agents=humans,
-        )
 
     def _match_slots(self) -> None:
         """Robots take crowdsim.slots' matching of goals; a robot whose goal changed has not reached it."""
