@@ -12,7 +12,7 @@ What matches RVO2
   (``point = v + u / 2``), and, for agents that already overlap, the cut-off circle of the simulation time
   step.
 * The incremental 2-D linear program on the max-speed disc (closest point to the preferred velocity), and the
-  3-D linear program (minimise the largest violation) when the 2-D one is infeasible.
+  3-D linear program (minimise the largest violation) when the 2-D one is infeasible (``crowdsim.orca_lp``).
 
 Deviations, all outside the behaviour one can observe in a crowd
 ----------------------------------------------------------------
@@ -39,9 +39,9 @@ from typing import Final
 import numpy as np
 
 from crowdsim.errors import SimulationError, got, real_number, refuse_bools, seconds, whole_number
+from crowdsim.orca_lp import lp2, lp3
 from crowdsim.world import MIN_DT, MOST_COORDINATE
 
-RVO_EPSILON: Final[float] = 1e-5  # RVO2's Definitions.h: tolerance for (almost) parallel lines
 # neighbor_dist is squared (1e300 overflowed the first step): a finite one up to 1000 km, far beyond any
 # crowd; inf, every agent a neighbour, works as it is (inf squared is inf).
 MAX_NEIGHBOR_DIST: Final[float] = 1e6  # m
@@ -250,88 +250,6 @@ def _apart(
     return apart_x, apart_y
 
 
-def _lp1(px, py, dx, dy, no, radius, optx, opty, direction_opt):
-    """RVO2's linearProgram1: optimum on line ``no`` within the disc and lines ``0..no-1``, or None."""
-    dot = px[no] * dx[no] + py[no] * dy[no]
-    discriminant = dot * dot + radius * radius - (px[no] * px[no] + py[no] * py[no])
-    if discriminant < 0.0:
-        return None  # the max-speed disc lies entirely outside line ``no``
-    sq = math.sqrt(discriminant)
-    t_left = -dot - sq
-    t_right = -dot + sq
-    dxn, dyn, pxn, pyn = dx[no], dy[no], px[no], py[no]
-    for i in range(no):
-        denominator = dxn * dy[i] - dyn * dx[i]
-        numerator = dx[i] * (pyn - py[i]) - dy[i] * (pxn - px[i])
-        if abs(denominator) <= RVO_EPSILON:
-            if numerator < 0.0:
-                return None  # (almost) parallel and line ``no`` lies outside line i
-            continue
-        t = numerator / denominator
-        if denominator >= 0.0:
-            t_right = min(t_right, t)
-        else:
-            t_left = max(t_left, t)
-        if t_left > t_right:
-            return None
-    if direction_opt:
-        t = t_right if optx * dxn + opty * dyn > 0.0 else t_left
-    else:
-        t = dxn * (optx - pxn) + dyn * (opty - pyn)
-        t = t_left if t < t_left else (t_right if t > t_right else t)
-    return pxn + t * dxn, pyn + t * dyn
-
-
-def _lp2(px, py, dx, dy, radius, optx, opty, direction_opt):
-    """RVO2's linearProgram2. Returns ``(index of the first infeasible line or len(lines), x, y)``."""
-    if direction_opt:
-        rx, ry = optx * radius, opty * radius  # optx, opty is a unit direction here
-    else:
-        norm_sq = optx * optx + opty * opty
-        if norm_sq > radius * radius:
-            scale = radius / math.sqrt(norm_sq)
-            rx, ry = optx * scale, opty * scale
-        else:
-            rx, ry = optx, opty
-    for i in range(len(px)):
-        if dx[i] * (py[i] - ry) - dy[i] * (px[i] - rx) > 0.0:
-            new = _lp1(px, py, dx, dy, i, radius, optx, opty, direction_opt)
-            if new is None:
-                return i, rx, ry
-            rx, ry = new
-    return len(px), rx, ry
-
-
-def _lp3(px, py, dx, dy, begin, radius, rx, ry):
-    """RVO2's linearProgram3 (no obstacle lines): the velocity minimising the largest line penetration."""
-    distance = 0.0
-    for i in range(begin, len(px)):
-        if dx[i] * (py[i] - ry) - dy[i] * (px[i] - rx) > distance:
-            qpx, qpy, qdx, qdy = [], [], [], []
-            for j in range(i):
-                determinant = dx[i] * dy[j] - dy[i] * dx[j]
-                if abs(determinant) <= RVO_EPSILON:
-                    if dx[i] * dx[j] + dy[i] * dy[j] > 0.0:
-                        continue  # parallel, same direction: line j adds nothing
-                    ox, oy = 0.5 * (px[i] + px[j]), 0.5 * (py[i] + py[j])
-                else:
-                    f = (dx[j] * (py[i] - py[j]) - dy[j] * (px[i] - px[j])) / determinant
-                    ox, oy = px[i] + f * dx[i], py[i] + f * dy[i]
-                ex, ey = dx[j] - dx[i], dy[j] - dy[i]
-                norm = math.sqrt(ex * ex + ey * ey)
-                qpx.append(ox)
-                qpy.append(oy)
-                qdx.append(ex / norm)
-                qdy.append(ey / norm)
-            fail, nx, ny = _lp2(qpx, qpy, qdx, qdy, radius, -dy[i], dx[i], True)
-            # A failure here is floating-point noise (the current result is feasible by construction):
-            # keep the current result.
-            if fail >= len(qpx):
-                rx, ry = nx, ny
-            distance = dx[i] * (py[i] - ry) - dy[i] * (px[i] - rx)
-    return rx, ry
-
-
 def orca_velocities(
     positions: np.ndarray,
     velocities: np.ndarray,
@@ -392,9 +310,9 @@ def orca_velocities(
     for row, s in enumerate(todo.tolist()):
         c = int(counts[s])
         px, py, dx, dy = pts[row][0][:c], pts[row][1][:c], dirs[row][0][:c], dirs[row][1][:c]
-        fail, rx, ry = _lp2(px, py, dx, dy, speeds[row], opts[row][0], opts[row][1], False)
+        fail, rx, ry = lp2(px, py, dx, dy, speeds[row], opts[row][0], opts[row][1], False)
         if fail < c:
             used_lp3[s] = True
-            rx, ry = _lp3(px, py, dx, dy, fail, speeds[row], rx, ry)
+            rx, ry = lp3(px, py, dx, dy, fail, speeds[row], rx, ry)
         new[s] = rx, ry
     return new, used_lp3
