@@ -124,7 +124,7 @@ class NoTwinWarning(RuntimeWarning):
 
 class FlockWarning(UserWarning):
     """Robots bound for separate places whom Eq. 15, every pair flocking, may hold together (pipelines.loop
-    .mpc_setup.warn_separate_goals; MPCConfig.flock_range)."""
+    .team_layout.warn_separate_goals; MPCConfig.flock_range)."""
 
 
 class DroppedLineWarning(UserWarning):
@@ -133,7 +133,7 @@ class DroppedLineWarning(UserWarning):
 
 
 class GoalRoomWarning(UserWarning):
-    """Two robots' goals closer than the MPC lets robots stand (pipelines.loop.mpc_setup.warn_goal_room;
+    """Two robots' goals closer than the MPC lets robots stand (pipelines.loop.team_layout.warn_goal_room;
     Eq. 12 keeps every pair d_min apart)."""
 
 

@@ -13,8 +13,8 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from crowdsim.world import PAPER_ROBOTS
-from pipelines.loop.mpc_setup import ROOM_SPACING, short_of_room
 from pipelines.loop.spec import MPC_CONTROLLERS
+from pipelines.loop.team_layout import ROOM_SPACING, short_of_room
 
 if TYPE_CHECKING:
     from pipelines.loop.controllers import ControllerSpec
@@ -164,11 +164,12 @@ def flock_note(
 def separate_goals_note(
     spec: ControllerSpec, n_robots: int, formation: str = "auto", spacing: float | None = None
 ) -> str | None:
-    """The controller's ``FlockWarning`` (pipelines.loop.mpc_setup.separate_goals) as a note, for the
+    """The controller's ``FlockWarning`` (pipelines.loop.team_layout.separate_goals) as a note, for the
     formation's layout: robots trading places (the antipodal formation) whom every pair flocking holds
     together, and the ``--set mpc.flock_range`` that parts them. Said here once for the run: a sweep's
     workers each said it (they leave the warning out now)."""
-    from pipelines.loop.mpc_setup import mpc_config, parting_message, separate_goals
+    from pipelines.loop.mpc_setup import mpc_config
+    from pipelines.loop.team_layout import parting_message, separate_goals
 
     if spec.controller not in MPC_CONTROLLERS or n_robots < 2:
         return None

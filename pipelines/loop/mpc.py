@@ -17,13 +17,13 @@ step whose solve raised CasADi's error (a failure inside a solver call is a ``Ru
 ``"exception: <type>"`` and the message in ``extra["exception"]``. Only that is guarded: any other exception
 of the solve (a ``TypeError`` is a bug, not a solver failure), an exception from the predictor it calls, or
 from anything else in the step propagates; so does Ctrl-C, which CasADi hands back inside a ``SystemError``.
+
 What the controller is built from and checked against (its ``MPCConfig``, the world the MPC, the predictor
 and the simulator must agree on, the history the predictor reads) is pipelines.loop.mpc_setup.
 """
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from typing import TYPE_CHECKING, Any
@@ -37,12 +37,10 @@ from mpc.dmpc import DMPC
 from mpc.dynamics import braking, rollout_numpy
 from mpc.fallback import PlanMemory, Start
 from mpc.fastcall import BufferedFunction
-from mpc.guidance import guidance_targets, lookahead
 from mpc.nlp import StepData
 from mpc.parked import yield_slack
 from mpc.stall import StallWatch
 from pipelines.errors import NoTwinWarning, PipelineError, act_before_reset, interrupt_behind
-from pipelines.loop.margins import observed_classes
 from pipelines.loop.mpc_setup import (
     SolversHeld,
     check_coupling,
@@ -54,16 +52,14 @@ from pipelines.loop.mpc_setup import (
     predictor_history,
     prepare_sizes,
     standing_history,
-    warn_team_layout,
 )
+from pipelines.loop.mpc_step import crowd_allowances, raised_output, solve_output
 from pipelines.loop.spec import ControllerSpec
-from pipelines.loop.step_record import allowances_record
+from pipelines.loop.team_layout import warn_team_layout
 from predictors.base import ObservingPredictor, Predictor
-from predictors.conformal_classes import CLASS_WINDOW, MOTION_CLASSES
+from predictors.conformal_classes import CLASS_WINDOW
 from predictors.errors import NoCasadiTwin, PredictorError
 from predictors.registry import load_predictor, loaded_sha256
-
-STANDING = MOTION_CLASSES.index("standing")
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
@@ -330,71 +326,19 @@ class MPCController(SolversHeld):
         return None if self.stall is None else ~self.stall.update(states[:, :2], goals, on_goal)
 
     def _crowd_allowances(self, obs: Observation, states: np.ndarray, on_goal: np.ndarray) -> dict[str, Any]:
-        """StepData's ``human_margins`` (per-class margins: each human's, ``(H, N_h)``) and
-        ``targets`` (guidance "standing": around the humans standing still); absent: the configured
-        margins for every human, the goals."""
-        cfg = self.cfg
-        if self.class_margins is None and cfg.guidance == "none":
-            return {}
-        classes = observed_classes(obs)
-        out: dict[str, Any] = {}
-        if self.class_margins is not None:
-            out["human_margins"] = margins = self.class_margins.per_human(classes, cfg.horizon)
-        if cfg.guidance == "standing":
-            standing = classes == STANDING
-            last = cfg.horizon - 1
-            margin = (
-                margins[last, standing].max(initial=0.0) if "human_margins" in out else cfg.human_margin(last)
-            )
-            out["targets"] = guidance_targets(
-                states[:, :2],
-                obs.robot_goals,
-                obs.human_positions[standing],
-                cfg.standing_clearance(float(margin)),
-                ~on_goal,
-                lookahead(cfg.v_max, cfg.horizon, cfg.dt),
-            )
-        return out
+        """StepData's per-class ``human_margins`` and guidance ``targets`` (pipelines.loop.mpc_step)."""
+        return crowd_allowances(self.cfg, self.class_margins, obs, states, on_goal)
 
     def _exception_output(self, exc: Exception, start: Start, data: StepData, t0: float) -> ControlOutput:
-        """A solve that raised: the step falls back to its start (the shifted plan, or braking) as for any
-        failed solve, and says what was raised."""
+        """A solve that raised falls back to its start, as any failed solve, and says what was raised."""
         self.solve_exceptions += 1
         self.memory.commit(start.accels, solved=False, kind=start.kind)
-        return ControlOutput(
-            accelerations=start.accels[:, 0].copy(),
-            solve_time_s=time.perf_counter() - t0,
-            status=f"exception: {type(exc).__name__}",
-            fallback=start.kind,
-            plan=rollout_numpy(data.states, start.accels, self.cfg.dt)[0],
-            extra={
-                "exception": f"{type(exc).__name__}: {exc}"[:500],
-                "solve_exceptions": self.solve_exceptions,
-            },
-        )
+        return raised_output(exc, start.accels, start.kind, data, t0, self.cfg.dt, self.solve_exceptions)
 
     def _output(self, result: IBRResult, start_kind: str, data: StepData, t0: float) -> ControlOutput:
-        cfg = self.cfg
         if result.solved:
-            plan, fallback = result.accels, None
-            self.memory.commit(plan, solved=True, lam_x=result.lam_x, lam_g=result.lam_g)
-        else:
-            plan, fallback = result.accels, start_kind  # unsolved: the start (Start.accels)
-            self.memory.commit(plan, solved=False, kind=start_kind)
-        return ControlOutput(
-            accelerations=plan[:, 0].copy(),
-            solve_time_s=time.perf_counter() - t0,
-            status=result.status,
-            iterations=result.iterations,
-            fallback=fallback,
-            potential=result.potential if math.isfinite(result.potential) else None,
-            plan=rollout_numpy(data.states, plan, cfg.dt)[0],
-            prediction=result.prediction,
-            iteration_predictions=result.predictions if self.spec.record_iterations else (),
-            extra={
-                "solves": result.solves,
-                "solver_iterations": result.solver_iterations,
-                "converged": result.converged,
-                **allowances_record(data),
-            },
-        )
+            self.memory.commit(result.accels, solved=True, lam_x=result.lam_x, lam_g=result.lam_g)
+        else:  # unsolved: the plan is the start (Start.accels)
+            self.memory.commit(result.accels, solved=False, kind=start_kind)
+        fallback = None if result.solved else start_kind
+        return solve_output(result, fallback, data, t0, self.cfg.dt, self.spec.record_iterations)

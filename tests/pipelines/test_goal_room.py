@@ -15,7 +15,7 @@ from pipelines.cli import main
 from pipelines.commands.team_notes import goal_room_note, radius_note
 from pipelines.errors import GoalRoomWarning
 from pipelines.loop.controllers import ControllerSpec, make_controller
-from pipelines.loop.mpc_setup import warn_goal_room
+from pipelines.loop.team_layout import warn_goal_room
 
 
 def _spec(controller: str = "cmpc", d_min: float | None = None) -> ControllerSpec:

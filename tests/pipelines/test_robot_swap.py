@@ -19,7 +19,7 @@ from mpc.config import MPCConfig
 from pipelines.errors import FlockWarning
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.gym_loop import run_gym_episode
-from pipelines.loop.mpc_setup import warn_separate_goals
+from pipelines.loop.team_layout import warn_separate_goals
 
 SWAP = Layout([[-4.0, 0.0], [4.0, 0.0]], [[4.0, 0.0], [-4.0, 0.0]], [], [])
 OFFSET = Layout([[-4.0, 0.0], [4.0, 0.05]], [[4.0, 0.0], [-4.0, 0.05]], [], [])
