@@ -168,7 +168,7 @@ def private_cache(prefix: str) -> Iterator[Path]:
     and the figures do not depend on what the cache held. The variable also roots the prepared datasets
     (``predictors.data.locate.cache_root``), which a run under this would prepare again: only the benchmarks
     that compile use it."""
-    from mpc.compile_cache import CACHE_ENV
+    from mpc.cache_location import CACHE_ENV
 
     before = os.environ.get(CACHE_ENV)
     with tempfile.TemporaryDirectory(prefix=prefix) as folder:

@@ -11,7 +11,9 @@ from pathlib import Path
 import casadi as ca
 
 from mpc.cache_entries import ENTRY, OWNED, entry_key, unless_locked
-from mpc.compile_cache import COMPILER, CompileCacheError, compiler, readable_dir
+from mpc.cache_location import readable_dir
+from mpc.compile_cache import COMPILER, compiler
+from mpc.errors import CompileCacheError
 
 
 @dataclass(frozen=True)

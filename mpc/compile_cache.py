@@ -8,7 +8,8 @@ of an NLP on a machine compiles it and stores it; every later build, in any proc
 Mechanism (CasADi's own, no generated code of ours): a solver built with ``jit_serialize="link"`` serializes
 to a description that names its compiled library instead of carrying source; ``Function.load`` of that
 description loads the library (``Importer(library, "dll")``) without generating or compiling anything. An
-entry is three files in ``$CROWDMPC_CACHE/compiled`` (default ``~/.cache/crowdmpc/compiled``):
+entry is three files in ``$CROWDMPC_CACHE/compiled`` (default ``~/.cache/crowdmpc/compiled``; which folder,
+and whether it can be written and compiled into: mpc/cache_location.py):
 
 * ``<key>.<tag>.so``: the library gcc wrote (``<tag>``: the compiling process and a random suffix, so that
   two processes compiling the same NLP never write the same file);
@@ -42,11 +43,8 @@ import hashlib
 import json
 import os
 import platform
-import pwd
-import re
 import secrets
 import shlex
-import shutil
 import sys
 from collections.abc import Mapping
 from pathlib import Path
@@ -64,13 +62,15 @@ from mpc.cache_entries import (
     publish,
     remove_dead_leftovers,
 )
+from mpc.cache_location import CACHE_ENV as CACHE_ENV
+from mpc.cache_location import SUBDIR as SUBDIR
+from mpc.cache_location import cache_dir as cache_dir
+from mpc.cache_location import free_bytes, location_error, writable_dir
+from mpc.cache_location import readable_dir as readable_dir
 from mpc.compiler import COMPILER, Check, Compiler, compiler, ended_after_cleanup, interruptible
-from mpc.errors import MPCConfigError
+from mpc.errors import CacheLocationError as CacheLocationError
+from mpc.errors import CompileCacheError
 
-# The variable and default of predictors.data.locate.cache_root, repeated here: importing predictors would
-# cost mpc a second of imports (trajnetplusplustools) and a dependency it does not otherwise have.
-CACHE_ENV: Final[str] = "CROWDMPC_CACHE"
-SUBDIR: Final[str] = "compiled"
 # Bump when the layout or the key changes: old entries are then never read (``crowdmpc cache clear``).
 FORMAT: Final[int] = 1
 # What compiling costs and saves, per NLP, for `crowdmpc sweep --jit auto`, measured by
@@ -84,140 +84,6 @@ SAVING_PER_EPISODE_S: Final[Mapping[str, float]] = {"joint": 0.10, "local": 0.19
 # Free space a compile may need: its C source, object, library and entry; the largest entry measured (CMPC,
 # 12 robots) is 27 MB, 23 of them its .casadi. Below it, gcc's "No space left" failed every episode.
 COMPILE_ROOM_BYTES: Final[int] = 64 * 2**20
-# What the shell splits a word on or reads specially: a path holding one is refused (``_shell_unsafe``). Any
-# other character, a non-ASCII letter among them (/home/josé), reaches gcc as it is; a resolved path starts
-# with "/", so a "~" in it is never expanded.
-SHELL_SPECIAL: Final[re.Pattern[str]] = re.compile(r"[\s'\"\\$`;&|<>()*?\[\]#!{}]")
-SHELL_SAFE: Final[str] = (
-    "a writable directory whose path is UTF-8 and has no space and none of '\"\\$`;&|<>()*?[]#!{}"
-)
-
-
-class CompileCacheError(RuntimeError):
-    """The cache cannot be used as asked (no compiler, a directory that is not one)."""
-
-
-class CacheLocationError(CompileCacheError, MPCConfigError):
-    """The cache directory cannot hold the cache (a file in its place, no write permission): a setting of the
-    user's ($CROWDMPC_CACHE), which the command line prints as one line (an MPCConfigError)."""
-
-
-def cache_dir() -> Path:
-    """``$CROWDMPC_CACHE/compiled``, else ``$XDG_CACHE_HOME/crowdmpc/compiled`` (an absolute one only, as
-    the XDG spec says), else ``~/.cache/crowdmpc/compiled`` (not created here); the prepared data's root is
-    the same folder (``predictors.data.locate.cache_root``)."""
-    root = os.environ.get(CACHE_ENV)
-    if root and (root == "~" or root.startswith("~/")):  # lstrip: home / "/x" of "~//x" is /x
-        return _home(f"${CACHE_ENV} {root}", " to an absolute path") / root[2:].lstrip("/") / SUBDIR
-    if root:
-        try:
-            return Path(root).expanduser() / SUBDIR  # ~user/...: the password database, never $HOME
-        except RuntimeError:  # ~user of no user: Python's error names no variable
-            raise CacheLocationError(f"${CACHE_ENV} {root}: no such user, so no home") from None
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    base = Path(xdg) if xdg and Path(xdg).is_absolute() else _home("the compile cache") / ".cache"
-    return base / "crowdmpc" / SUBDIR
-
-
-def _home(what: str, wanted: str = "") -> Path:
-    """An absolute ``$HOME``, else the password database's home (``Path.home()`` took ``HOME=`` for "/"):
-    predictors.home.home_dir repeated, as CACHE_ENV is, for mpc and predictors import nothing of each other
-    and share only crowdsim.world, which holds the world's facts."""
-    home = os.environ.get("HOME")
-    if home and Path(home).is_absolute():
-        return Path(home)
-    try:
-        entry = pwd.getpwuid(os.getuid()).pw_dir
-    except KeyError:
-        entry = ""
-    if not Path(entry).is_absolute():  # no password entry, or one without a home
-        raise CacheLocationError(
-            f"cannot find the home directory for {what} (no absolute $HOME, and none in the password "
-            f"database); set ${CACHE_ENV}{wanted}"
-        )
-    return Path(entry)
-
-
-def _nearest_existing(path: Path) -> Path:
-    return next(p for p in (path, *path.parents) if os.path.lexists(p))
-
-
-def free_bytes(directory: str | Path | None = None) -> int:
-    """Free space on the file system the cache is (or would be made) on, for this user."""
-    return shutil.disk_usage(_nearest_existing(Path(directory) if directory else cache_dir())).free
-
-
-def _file_in_the_way(path: Path) -> Path | None:
-    """The nearest existing one of ``path`` and its parents when it is no directory (a file, a dangling or
-    looping symbolic link): then ``path`` can be no directory."""
-    existing = _nearest_existing(path)
-    return None if existing.is_dir() else existing
-
-
-def _unwritable(path: Path) -> str | None:
-    """Why the directory ``path`` cannot be written in, creating it (and its parents) when it can."""
-    existing = _nearest_existing(path)
-    if not existing.is_dir():
-        return f"{existing} is not a directory"
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):  # a read-only or foreign place
-            return f"{existing} is not writable ({exc.strerror})"
-        return f"{path} cannot be created ({exc.strerror or exc})"
-    if not os.access(path, os.W_OK | os.X_OK):
-        return f"{path} is not writable"
-    return None
-
-
-def _shell_unsafe(path: Path) -> str | None:
-    """Why CasADi cannot compile into the directory ``path``, or None: its "shell" compiler pastes the
-    directory into a command line unquoted, so a space (or any character the shell splits on or interprets)
-    makes gcc write its output at another path, outside the cache, and the build fail."""
-    try:
-        resolved = str(path.resolve())
-    except (OSError, RuntimeError):  # a symbolic link loop: _unwritable names it
-        return None
-    if not _utf8(resolved):  # undecodable bytes: CasADi receives "" for the path
-        if _utf8_bytes(resolved):  # UTF-8 on disk, but the locale's encoding (ASCII) could not read it
-            encoding = sys.getfilesystemencoding()
-            return (
-                f"its path {resolved!r} is not text in this locale's encoding ({encoding}), which CasADi "
-                "cannot pass to gcc: run under a UTF-8 locale (LANG=C.UTF-8) or name an ASCII path"
-            )
-        return f"its path {resolved!r} is not UTF-8, which CasADi cannot pass to gcc"
-    if SHELL_SPECIAL.search(resolved) is None:
-        return None
-    return f"its path {resolved!r} holds a space or shell character, which CasADi passes to gcc unquoted"
-
-
-def _utf8_bytes(text: str) -> bool:
-    """Whether the bytes behind ``text`` (a path as Python decoded it) are valid UTF-8."""
-    try:
-        os.fsencode(text).decode("utf-8")
-    except UnicodeDecodeError:
-        return False
-    return True
-
-
-def _utf8(text: str) -> bool:
-    """Whether ``text`` (a path as Python decodes it, undecodable bytes as surrogates) is valid UTF-8."""
-    try:
-        text.encode("utf-8")
-    except UnicodeEncodeError:
-        return False
-    return True
-
-
-def _location_error(
-    folder: Path, directory: str | Path | None, problem: str, wanted: str = "a writable directory"
-) -> CacheLocationError:
-    """The one-line error about a cache directory that cannot be used (naming $CROWDMPC_CACHE if set)."""
-    if directory is not None:
-        return CacheLocationError(f"the compile cache {folder}: {problem}")
-    root = os.environ.get(CACHE_ENV)
-    named = f"${CACHE_ENV}={root}" if root else f"the compile cache {folder} (default; ${CACHE_ENV} unset)"
-    return CacheLocationError(f"{named}: {problem}; set ${CACHE_ENV} to {wanted}")
 
 
 def _key(kind: str, options: Mapping, payload: str, cc: Compiler, folder: Path) -> str:
@@ -246,30 +112,6 @@ def nlp_key(plugin: str, nlp: Mapping, options: Mapping, cc: Compiler, folder: P
     return _key(f"nlpsol:{plugin}:{','.join(names)}", options, oracle.serialize(), cc, folder)
 
 
-def readable_dir(directory: str | Path | None) -> Path:
-    """The cache directory, not created: ``CacheLocationError`` when a file stands where it must be (it is
-    then not "not created yet", nor empty: it cannot be)."""
-    path = Path(directory) if directory is not None else cache_dir()
-    blocker = _file_in_the_way(path)
-    if blocker is not None:
-        raise _location_error(path, directory, f"{blocker} is not a directory")
-    return path
-
-
-def writable_dir(directory: str | Path | None = None) -> Path:
-    """The cache directory (``directory``, else ``cache_dir()``), created, about to be written in;
-    ``CacheLocationError`` naming $CROWDMPC_CACHE and what is wrong when it cannot be (a caller may check
-    this before starting workers)."""
-    path = Path(directory) if directory is not None else cache_dir()
-    unsafe = _shell_unsafe(path)  # checked first: such a directory is refused, so it is not created either
-    if unsafe is not None:
-        raise _location_error(path, directory, unsafe, SHELL_SAFE)
-    problem = _unwritable(path)
-    if problem is not None:
-        raise _location_error(path, directory, problem)
-    return path
-
-
 def nlpsol(
     name: str, plugin: str, nlp: Mapping, options: Mapping, *, directory: str | Path | None = None
 ) -> ca.Function:
@@ -295,7 +137,7 @@ def nlpsol(
         return _compile_locked(name, plugin, nlp, options, cc, folder, key)
     except NoLocks as exc:
         problem = f"cannot lock {exc.filename} ({exc.strerror}): its file system does not lock files"
-        raise _location_error(folder, directory, problem, "a folder on a file system that does") from None
+        raise location_error(folder, directory, problem, "a folder on a file system that does") from None
 
 
 def _compile_locked(

@@ -1,5 +1,16 @@
-"""Errors a user can cause through the controller configuration. Printed by the CLI without a traceback."""
+"""Errors a user can cause through the controller configuration or the compile cache's setting. Printed by the
+CLI without a traceback."""
 
 
 class MPCConfigError(ValueError):
     """An MPC configuration value outside its valid range, named with the value and what is expected."""
+
+
+class CompileCacheError(RuntimeError):
+    """The compile cache (mpc/compile_cache.py) cannot be used as asked (no compiler, a directory that is not
+    one)."""
+
+
+class CacheLocationError(CompileCacheError, MPCConfigError):
+    """The cache directory cannot hold the cache (a file in its place, no write permission): a setting of the
+    user's ($CROWDMPC_CACHE), which the command line prints as one line (an MPCConfigError)."""

@@ -3,7 +3,7 @@
 Not ``Path.home()`` nor ``expanduser``: both take an empty ``$HOME`` (``env HOME= crowdmpc``) for "/", so a
 run as root wrote its cache into /.cache/crowdmpc, and a relative ``$HOME`` for a folder of the current
 directory, a location that changed with it. A ``$HOME`` that is no absolute path is passed over as an unset
-one is, for the password database's home. (``mpc.compile_cache`` keeps a copy of ``home_dir``: mpc imports
+one is, for the password database's home. (``mpc.cache_location`` keeps a copy of ``home_dir``: mpc imports
 nothing of predictors.)
 """
 

@@ -61,7 +61,9 @@ def _size(n: int) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mpc import cache_admin, compile_cache
+    from mpc import cache_admin
+    from mpc.cache_location import cache_dir
+    from mpc.errors import CompileCacheError
 
     if args.cache_command == "info":
         stats = cache_admin.info()
@@ -80,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     try:
         removed, freed, busy = cache_admin.clear()
-    except compile_cache.CompileCacheError as exc:
+    except CompileCacheError as exc:
         raise PipelineError(str(exc)) from exc
     left = (
         f"; left {busy} entr{'y' if busy == 1 else 'ies'} another process is compiling now (clear again once "
@@ -89,5 +91,5 @@ def run(args: argparse.Namespace) -> int:
         else ""
     )
     files = "file" if removed == 1 else "files"
-    print(f"removed {removed} {files} ({_size(freed)}) from {compile_cache.cache_dir()}{left}")
+    print(f"removed {removed} {files} ({_size(freed)}) from {cache_dir()}{left}")
     return 0

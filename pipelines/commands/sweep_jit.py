@@ -36,7 +36,8 @@ def choose_jit(
 
 def _room_short_by() -> str | None:
     """Why the compile cache's file system has no room for a compile, or None when it has."""
-    from mpc.compile_cache import COMPILE_ROOM_BYTES, cache_dir, free_bytes
+    from mpc.cache_location import cache_dir, free_bytes
+    from mpc.compile_cache import COMPILE_ROOM_BYTES
 
     free = free_bytes()
     if free >= COMPILE_ROOM_BYTES:
@@ -52,7 +53,8 @@ def check_compile_cache(label: str, choice: str) -> None:
     """The compile cache the workers will compile into, checked (and made) before they start: there an
     unusable one ($CROWDMPC_CACHE a file, read-only, a path gcc cannot take, a full disk) raised in every
     episode."""
-    from mpc.compile_cache import CacheLocationError, writable_dir
+    from mpc.cache_location import writable_dir
+    from mpc.errors import CacheLocationError
 
     try:
         writable_dir()

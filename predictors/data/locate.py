@@ -83,7 +83,7 @@ def _not_a_directory(path: Path) -> str:
 def cache_root() -> Path:
     """``$CROWDMPC_CACHE``, else ``$XDG_CACHE_HOME/crowdmpc`` (an absolute ``XDG_CACHE_HOME`` only, as the
     XDG spec says), else ``~/.cache/crowdmpc`` (not created here: reading needs no directory). The compile
-    cache's root is the same folder (``mpc.compile_cache.cache_dir``: mpc imports nothing of predictors)."""
+    cache's root is the same folder (``mpc.cache_location.cache_dir``: mpc imports nothing of predictors)."""
     root = os.environ.get(CACHE_ENV)
     if root:
         return expand_home(root, f"${CACHE_ENV}")
@@ -108,7 +108,7 @@ def writable_cache_dir(*parts: str) -> Path:
 
 def _unwritable(path: Path) -> str | None:
     """Why the directory ``path`` cannot be written in, creating it (and its parents) when it can.
-    (mpc.compile_cache checks its directory alike; mpc does not import predictors.)"""
+    (mpc.cache_location checks its directory alike; mpc does not import predictors.)"""
     existing = next(p for p in (path, *path.parents) if os.path.lexists(p))
     if not existing.is_dir():  # a file, or a dangling or looping symbolic link
         return f"{existing} is not a directory"

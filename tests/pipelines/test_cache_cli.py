@@ -6,7 +6,7 @@ import json
 import casadi as ca
 import pytest
 
-from mpc import compile_cache
+from mpc import cache_location, compile_cache
 from mpc.cache_entries import locked
 from pipelines.cli import main
 from tests.waits import within
@@ -141,15 +141,15 @@ def test_a_cache_without_room_for_a_compile_is_refused_by_on_and_turns_auto_off(
     from pipelines.experiments.cells import EXPERIMENTS
 
     # the nearest folder that exists: the cache is made only when a compile comes
-    assert compile_cache.free_bytes() == shutil.disk_usage(tmp_path).free
+    assert cache_location.free_bytes() == shutil.disk_usage(tmp_path).free
     room = compile_cache.COMPILE_ROOM_BYTES
     monkeypatch.setattr(worker, "jit_available", lambda: True)
     experiment = EXPERIMENTS["predictors"].with_predictors(SEVEN)
-    monkeypatch.setattr(compile_cache, "free_bytes", lambda: room)
+    monkeypatch.setattr(cache_location, "free_bytes", lambda: room)
     assert sweep_jit.choose_jit("auto", "--jit", experiment, None, 3, 100)
-    monkeypatch.setattr(compile_cache, "free_bytes", lambda: room - 1)
+    monkeypatch.setattr(cache_location, "free_bytes", lambda: room - 1)
     assert not sweep_jit.choose_jit("auto", "--jit", experiment, None, 3, 100)
-    monkeypatch.setattr(compile_cache, "free_bytes", lambda: room // 2)
+    monkeypatch.setattr(cache_location, "free_bytes", lambda: room // 2)
     out = tmp_path / "sweep"
     args = [
         "sweep",
