@@ -9,7 +9,8 @@ import torch
 
 from predictors.constant_velocity import ConstantVelocity
 from predictors.errors import PredictorError
-from predictors.learned import LearnedPredictor, casadi_name
+from predictors.learned import LearnedPredictor
+from predictors.learned_casadi import casadi_name
 from predictors.nets.social_gan import generator_config
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
 from predictors.registry import load_predictor
@@ -305,7 +306,7 @@ def test_each_size_is_built_once(monkeypatch):
     first = predictor.to_casadi(3, 2, HORIZON)
     assert predictor.to_casadi(3, 2, HORIZON) is first
     predictor.to_casadi(1, 1, HORIZON)
-    # the first call also builds the check's size (predictors.learned.PARITY_SIZE), once
+    # the first call also builds the check's size (predictors.learned_casadi.PARITY_SIZE), once
     assert sorted(built) == sorted([(3, 2, HORIZON), (2, 1, 3), (1, 1, HORIZON)])
 
 
