@@ -7,20 +7,14 @@ import json
 import math
 import sys
 from collections.abc import Mapping
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, comma_items, path_arg, write_output
 from pipelines.commands.output_paths import file_output_arg
+from pipelines.commands.review_folder import recordings_or_none, review_folder
 from pipelines.commands.review_notes import (
-    deeper_note,
-    subfolders_note,
-    unread_below,
     warn,
     warn_different_crowds,
-    warn_failures_only,
-    warn_mixed_code,
-    warn_repeats,
 )
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
@@ -183,101 +177,6 @@ def _with_units(summary: dict[str, Any]) -> dict[str, Any]:
     return summary | {"metrics": named}
 
 
-def _read_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[list[RunDigest], int]:
-    """Every readable recording of ``folder``, digested (``pipelines.logs.digest``: read one at a time, the
-    messages let go), and how many were not readable; a line on stderr for each left out."""
-    from tqdm import tqdm
-
-    from pipelines.logs.digest import digest
-    from pipelines.logs.reader import find_recordings, read_recording
-
-    try:
-        paths, unfinished = find_recordings(folder)
-    except PipelineError as exc:  # nothing within two levels: say what lies deeper (a folder of sweeps)
-        raise PipelineError(f"{exc}{deeper_note(folder)}") from None
-    # its own files read: those of its subfolders are not (never mixed), which must not pass unsaid
-    unread = unread_below(folder) if any(p.parent == folder for p in paths + unfinished) else 0
-    for path in unfinished:
-        print(
-            f"crowdmpc review: warning: skipping {path}: unfinished (its run was killed or is still "
-            f"writing); `crowdmpc review {path}` reads what it holds",
-            file=sys.stderr,
-        )
-    runs, unreadable = [], {}
-    # a bar on a terminal only (disable=None): a sweep's thousands of files take minutes
-    for path in tqdm(paths, desc=f"reading {folder}", unit="file", leave=False, disable=None):
-        try:
-            runs.append(digest(read_recording(path), check))
-        except PipelineError as exc:
-            unreadable[str(path)] = str(exc)
-            tqdm.write(f"crowdmpc review: unreadable: {exc}", file=sys.stderr)
-    report.update(unreadable=unreadable, unfinished=[str(p) for p in unfinished])
-    note = subfolders_note(folder, unread) if unread else ""
-    if not runs:
-        raise PipelineError(
-            f"no readable recording in {folder} ({len(unreadable)} unreadable, {len(unfinished)} unfinished)"
-            + (f"; {note}" if note else "")
-        )
-    if note:
-        warn(f"{folder}: {note}")
-    return runs, len(unreadable)
-
-
-def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[list[RunDigest], int]:
-    """``review DIR``: every readable recording's summary, then a table and aggregate per set-up (a note, not
-    a warning, names several: a sweep's cells are so by design), into ``report``; the runs and the number of
-    unreadable files."""
-    from pipelines.logs.identity import RUN_IDENTITY
-    from pipelines.logs.review import aggregate_table, count, setups_table
-    from pipelines.logs.setups import drop_repeats, group_parts, groups, named_settings, short_names
-
-    runs, n_unreadable = _read_folder(folder, report, check)
-    warn_failures_only(folder, runs)
-    report["runs"] = [run.summary for run in runs]
-    setups = groups(runs)
-    repeats = [drop_repeats(setup) for setup in setups]
-    named = named_settings(setups)
-    parts = [group_parts(setup, named) for setup in setups]
-    names = [", ".join(p) for p in parts]
-    if len(setups) > 1:
-        print(
-            f"crowdmpc review: note: {folder} holds runs of {len(setups)} different set-ups "
-            f"({'; '.join(names)}): one aggregate for each, none over all",
-            file=sys.stderr,
-        )
-    report["groups"] = []
-    for setup, name, repeated in zip(setups, names, repeats, strict=True):
-        members = [run.summary for run in setup.members]
-        warn_repeats(folder, name, repeated)
-        warn_mixed_code(folder, name, members)
-        table, totals = aggregate_table(members, [run.solve_times_s for run in setup.members], root=folder)
-        if len(setups) > 1:
-            print(f"== {name}: {count(len(setup.members), 'run')} ==")
-        print(table + ("\n" if len(setups) > 1 else ""))
-        identity = setup.identity or {}
-        report["groups"].append(
-            {"name": name}
-            | {k: members[0][k] for k in RUN_IDENTITY}
-            | {"settings": {k: identity.get(k) for k in named}}
-            | {"files": [run.file for run in setup.members], "repeats": repeated, "totals": totals}
-        )
-    if len(setups) == 1:  # as before the folder held several: the one set-up's totals at the top
-        report["totals"] = report["groups"][0]["totals"]
-    else:
-        side_by_side = setups_table(short_names(parts), [group["totals"] for group in report["groups"]])
-        print(f"== {count(len(setups), 'set-up')} side by side ==\n{side_by_side}")
-    return runs, n_unreadable
-
-
-def _recordings_or_none(folder: Path) -> list[Path]:
-    from pipelines.logs.reader import find_recordings
-
-    try:
-        return find_recordings(folder)[0]
-    except PipelineError:
-        return []
-
-
 def _check_distinct_outputs(args: argparse.Namespace) -> None:
     """Each output its own file: written one after the other, the last (--json) replaced the figure."""
     outputs = [(f"--{name}", getattr(args, name)) for name in ("plot", "animate", "json")]
@@ -340,15 +239,13 @@ def _review(args: argparse.Namespace) -> int:
             f"--{name}" for name in ("plot", "times", "animate", "compare") if getattr(args, name)
         ]
         if single_file_only:
-            files = [
-                p for p in _recordings_or_none(args.path) if p.is_file()
-            ]  # a folder named *.mcap is none
+            files = [p for p in recordings_or_none(args.path) if p.is_file()]  # a folder named *.mcap is none
             example = f"; give one of its files, e.g. {files[0]}" if files else ""
             verb = "needs" if len(single_file_only) == 1 else "need"
             raise PipelineError(
                 f"{', '.join(single_file_only)} {verb} one .mcap file, not the folder {args.path}{example}"
             )
-        runs, n_unreadable = _review_folder(args.path, report, args.check)
+        runs, n_unreadable = review_folder(args.path, report, args.check)
     else:
         rec = read_recording(args.path)
         # read before anything is printed: a --compare file that cannot be read is the one line, alone
