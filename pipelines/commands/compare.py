@@ -17,7 +17,8 @@ from pipelines.plain_json import plain
 from pipelines.whole_files import save_figure
 
 if TYPE_CHECKING:
-    from pipelines.experiments.compare import Identity, Paired, Run, Versus
+    from pipelines.experiments.compare import Identity, Run
+    from pipelines.experiments.paired import Paired, Versus
 
 EPILOG = """examples:
   crowdmpc compare runs/table2 runs/table2-cp
@@ -184,7 +185,8 @@ def _nothing_shared(runs: list[Run]) -> str:
 
 
 def _report(runs: list[Run], shared: list[Identity]) -> dict[str, Any]:
-    from pipelines.experiments.compare import groups_of, settings_differ, side, versus
+    from pipelines.experiments.compare import groups_of, settings_differ
+    from pipelines.experiments.paired import side, versus
 
     base = runs[0]
     groups = []

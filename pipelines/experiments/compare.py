@@ -17,7 +17,7 @@ comparison is what the runs differ in, listed beside it (``settings_differ``); o
 
 The paired counts are the exact McNemar test's discordant pairs (pipelines.experiments.tables): episodes where
 the run has the outcome and the first run not, and the reverse. The difference of the two rates has Newcombe's
-square-and-add 95 % interval for paired proportions (``paired_interval``), which unlike the normal
+square-and-add 95 % interval for paired proportions (pipelines.experiments.paired), which unlike the normal
 approximation stays inside [-100, 100] % and is not of zero width at 0 of n. Travel time is compared on the
 episodes both runs completed, as the mean of the differences with Student's t 95 % half-width, as cells.csv
 gives a mean's. Each describes one group; none is corrected for the number of groups compared.
@@ -27,8 +27,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
-import statistics
 import sys
 from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass, field
@@ -39,8 +37,7 @@ from crowdsim.metrics import ADDED_FIELDS
 from pipelines.errors import PipelineError
 from pipelines.experiments.compare_sources import recording_records, simulate_records, sweep_records
 from pipelines.experiments.log import EPISODES_FILE
-from pipelines.experiments.summary import t95, wilson_interval
-from pipelines.experiments.tables import mcnemar_exact, p_text
+from pipelines.experiments.paired import FLAGS, Outcome
 from pipelines.logs.identity import NOT_SETTINGS, UNRECORDED_DEFAULTS, dotted_settings
 from pipelines.logs.reader import UNFINISHED_SUFFIX, find_recordings
 from pipelines.loop.replay_data import REACTIVE_SUFFIX
@@ -49,7 +46,6 @@ from predictors.progress import progress_bar
 
 # The simulator settings besides scenario, seed and team that decide an episode's crowd (module docstring).
 CROWD_SETTINGS: Final = ("crowd", "crossing", "spawn_separation", "formation", "robot_spacing")
-FLAGS: Final[tuple[str, ...]] = ("success", "collision", "contact")
 # Record fields beyond its config that tell what ran (wall time, worker and key differ in any two runs).
 RUN_FIELDS: Final[tuple[str, ...]] = (
     "predictor",
@@ -62,25 +58,6 @@ RUN_FIELDS: Final[tuple[str, ...]] = (
 SOURCES: Final = "a sweep folder, a simulate --json file, or recordings: an .mcap file or a folder of them"
 Group = tuple[str, int, int]  # method (case folded), humans, robots
 Identity = tuple[Any, ...]  # Group + scenario, seed and the crowd's settings
-
-
-@dataclass(frozen=True, slots=True)  # one per episode: a million a run at 1000x Table II
-class Outcome:
-    """What one episode of a run is compared by. ``digest`` stands for every metric it recorded, ``core`` for
-    those every record has (not crowdsim.metrics' ``ADDED_FIELDS``, which ``added`` names where present)."""
-
-    success: bool
-    collision: bool
-    contact: bool
-    travel_time: float | None
-    key: str
-    digest: bytes
-    core: bytes
-    added: frozenset[str]
-
-    def same_metrics(self, other: Outcome) -> bool:
-        """Every metric equal; where one record predates some of ``ADDED_FIELDS``, every metric but those."""
-        return self.digest == other.digest if self.added == other.added else self.core == other.core
 
 
 @dataclass
@@ -248,112 +225,6 @@ def _outcome(record: Mapping[str, Any], kinds: dict[frozenset[str], frozenset[st
 
 def _digest(values: Mapping[str, Any]) -> bytes:
     return hashlib.blake2b(json.dumps(values, sort_keys=True).encode(), digest_size=16).digest()
-
-
-@dataclass(frozen=True)
-class Paired:
-    """One flag, one run against the first, on the shared episodes: ``gained`` where only the run has it,
-    ``lost`` where only the first has it, ``both`` and ``neither``."""
-
-    gained: int
-    lost: int
-    both: int = 0
-    neither: int = 0
-
-    @property
-    def p(self) -> float:
-        return mcnemar_exact(self.gained, self.lost)
-
-    @property
-    def difference(self) -> float:
-        """The run's rate minus the first's, as a fraction."""
-        n = self.gained + self.lost + self.both + self.neither
-        return (self.gained - self.lost) / n if n else math.nan
-
-    @property
-    def interval(self) -> tuple[float, float]:
-        return paired_interval(self.both, self.gained, self.lost, self.neither)
-
-    def text(self) -> str:
-        return f"+{self.gained} / −{self.lost} (p = {p_text(self.p)})"
-
-
-def paired_interval(both: int, gained: int, lost: int, neither: int) -> tuple[float, float]:
-    """The 95 % interval, as fractions, of a run's rate minus the first run's on paired episodes (``both``
-    with the outcome, ``gained`` in the run alone, ``lost`` in the first alone, ``neither``): Newcombe's
-    square-and-add of the two Wilson intervals, with the correlation of the pairs (continuity-corrected
-    phi; R. G. Newcombe, Statistics in Medicine 17, 2635-2650, 1998, method 10). (nan, nan) for no pair."""
-    n = both + gained + lost + neither
-    if n == 0:
-        return math.nan, math.nan
-    p1, p2 = (both + gained) / n, (both + lost) / n
-    (l1, u1), (l2, u2) = wilson_interval(both + gained, n), wilson_interval(both + lost, n)
-    product = (both + gained) * (lost + neither) * (both + lost) * (gained + neither)
-    cross = both * neither - gained * lost
-    phi = 0.0
-    if product and cross > n / 2:
-        phi = (cross - n / 2) / math.sqrt(product)
-    elif product and cross < 0:
-        phi = cross / math.sqrt(product)
-    below = math.sqrt(max(0.0, (p1 - l1) ** 2 + (u2 - p2) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2)))
-    above = math.sqrt(max(0.0, (u1 - p1) ** 2 + (p2 - l2) ** 2 - 2 * phi * (u1 - p1) * (p2 - l2)))
-    return max(-1.0, p1 - p2 - below), min(1.0, p1 - p2 + above)
-
-
-@dataclass(frozen=True)
-class Side:
-    """One run's figures in one group: rates in %, mean travel time over its successes."""
-
-    n: int
-    rates: dict[str, float]
-    travel: float | None
-
-
-@dataclass(frozen=True)
-class Versus:
-    """One run against the first in one group."""
-
-    flags: dict[str, Paired]
-    travel_difference: float | None  # mean of (run - first) over the episodes both completed, s
-    travel_half_width: float | None
-    travel_n: int
-    same: int  # episodes whose every metric equals the first run's
-
-    def travel_text(self) -> str:
-        if self.travel_difference is None:
-            return "n/a"
-        spread = "" if self.travel_half_width is None else f" ± {self.travel_half_width:.2f}"
-        return f"{self.travel_difference:+.2f}{spread} ({self.travel_n})"
-
-
-def side(outcomes: list[Outcome]) -> Side:
-    travel = [o.travel_time for o in outcomes if o.success and o.travel_time is not None]
-    rates = {name: 100.0 * sum(getattr(o, name) for o in outcomes) / len(outcomes) for name in FLAGS}
-    return Side(len(outcomes), rates, sum(travel) / len(travel) if travel else None)
-
-
-def versus(base: list[Outcome], other: list[Outcome]) -> Versus:
-    """``other`` against ``base``, the same episodes in the same order."""
-    pairs = list(zip(base, other, strict=True))
-    flags = {
-        name: Paired(
-            sum(getattr(o, name) and not getattr(b, name) for b, o in pairs),
-            sum(getattr(b, name) and not getattr(o, name) for b, o in pairs),
-            sum(getattr(b, name) and getattr(o, name) for b, o in pairs),
-            sum(not getattr(b, name) and not getattr(o, name) for b, o in pairs),
-        )
-        for name in FLAGS
-    }
-    differences = [
-        o.travel_time - b.travel_time
-        for b, o in pairs
-        if b.success and o.success and b.travel_time is not None and o.travel_time is not None
-    ]
-    mean = statistics.fmean(differences) if differences else None
-    n = len(differences)
-    half = t95(n - 1) * statistics.stdev(differences) / math.sqrt(n) if n > 1 else None
-    same = sum(b.same_metrics(o) for b, o in pairs)
-    return Versus(flags, mean, half, len(differences), same)
 
 
 def shared_identities(runs: list[Run]) -> list[Identity]:

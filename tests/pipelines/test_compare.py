@@ -11,7 +11,7 @@ import pytest
 from pipelines.cli import main
 from pipelines.commands.compare import labelled
 from pipelines.errors import PipelineError
-from pipelines.experiments.compare import Outcome, paired_interval, versus
+from pipelines.experiments.paired import Outcome, paired_interval, versus
 from pipelines.experiments.tables import mcnemar_exact
 
 ENV = {"crowd": "orca", "crossing": "paper", "spawn_separation": 0.5, "formation": "auto", "time_limit": 40.0}

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from pipelines.experiments.cells import get_experiment
-from pipelines.experiments.compare import Paired
+from pipelines.experiments.paired import Paired
 from pipelines.experiments.summary import summarize
 from pipelines.experiments.tables import markdown_table, mcnemar_exact
 from tests.pipelines.test_small_fixes import _records

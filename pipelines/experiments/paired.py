@@ -1,0 +1,141 @@
+"""One run against the first on the episodes both hold (``crowdmpc compare``, pipelines.experiments.compare):
+each episode's ``Outcome``, the paired counts of each flag with the exact McNemar test and Newcombe's
+interval (``Paired``, ``paired_interval``), and the travel time's paired difference (``versus``); one run's
+own rates (``side``). The statistics are described in pipelines.experiments.compare's docstring."""
+
+from __future__ import annotations
+
+import math
+import statistics
+from dataclasses import dataclass
+from typing import Final
+
+from pipelines.experiments.summary import t95, wilson_interval
+from pipelines.experiments.tables import mcnemar_exact, p_text
+
+FLAGS: Final[tuple[str, ...]] = ("success", "collision", "contact")
+
+
+@dataclass(frozen=True, slots=True)  # one per episode: a million a run at 1000x Table II
+class Outcome:
+    """What one episode of a run is compared by. ``digest`` stands for every metric it recorded, ``core`` for
+    those every record has (not crowdsim.metrics' ``ADDED_FIELDS``, which ``added`` names where present)."""
+
+    success: bool
+    collision: bool
+    contact: bool
+    travel_time: float | None
+    key: str
+    digest: bytes
+    core: bytes
+    added: frozenset[str]
+
+    def same_metrics(self, other: Outcome) -> bool:
+        """Every metric equal; where one record predates some of ``ADDED_FIELDS``, every metric but those."""
+        return self.digest == other.digest if self.added == other.added else self.core == other.core
+
+
+@dataclass(frozen=True)
+class Paired:
+    """One flag, one run against the first, on the shared episodes: ``gained`` where only the run has it,
+    ``lost`` where only the first has it, ``both`` and ``neither``."""
+
+    gained: int
+    lost: int
+    both: int = 0
+    neither: int = 0
+
+    @property
+    def p(self) -> float:
+        return mcnemar_exact(self.gained, self.lost)
+
+    @property
+    def difference(self) -> float:
+        """The run's rate minus the first's, as a fraction."""
+        n = self.gained + self.lost + self.both + self.neither
+        return (self.gained - self.lost) / n if n else math.nan
+
+    @property
+    def interval(self) -> tuple[float, float]:
+        return paired_interval(self.both, self.gained, self.lost, self.neither)
+
+    def text(self) -> str:
+        return f"+{self.gained} / −{self.lost} (p = {p_text(self.p)})"
+
+
+def paired_interval(both: int, gained: int, lost: int, neither: int) -> tuple[float, float]:
+    """The 95 % interval, as fractions, of a run's rate minus the first run's on paired episodes (``both``
+    with the outcome, ``gained`` in the run alone, ``lost`` in the first alone, ``neither``): Newcombe's
+    square-and-add of the two Wilson intervals, with the correlation of the pairs (continuity-corrected
+    phi; R. G. Newcombe, Statistics in Medicine 17, 2635-2650, 1998, method 10). (nan, nan) for no pair."""
+    n = both + gained + lost + neither
+    if n == 0:
+        return math.nan, math.nan
+    p1, p2 = (both + gained) / n, (both + lost) / n
+    (l1, u1), (l2, u2) = wilson_interval(both + gained, n), wilson_interval(both + lost, n)
+    product = (both + gained) * (lost + neither) * (both + lost) * (gained + neither)
+    cross = both * neither - gained * lost
+    phi = 0.0
+    if product and cross > n / 2:
+        phi = (cross - n / 2) / math.sqrt(product)
+    elif product and cross < 0:
+        phi = cross / math.sqrt(product)
+    below = math.sqrt(max(0.0, (p1 - l1) ** 2 + (u2 - p2) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2)))
+    above = math.sqrt(max(0.0, (u1 - p1) ** 2 + (p2 - l2) ** 2 - 2 * phi * (u1 - p1) * (p2 - l2)))
+    return max(-1.0, p1 - p2 - below), min(1.0, p1 - p2 + above)
+
+
+@dataclass(frozen=True)
+class Side:
+    """One run's figures in one group: rates in %, mean travel time over its successes."""
+
+    n: int
+    rates: dict[str, float]
+    travel: float | None
+
+
+@dataclass(frozen=True)
+class Versus:
+    """One run against the first in one group."""
+
+    flags: dict[str, Paired]
+    travel_difference: float | None  # mean of (run - first) over the episodes both completed, s
+    travel_half_width: float | None
+    travel_n: int
+    same: int  # episodes whose every metric equals the first run's
+
+    def travel_text(self) -> str:
+        if self.travel_difference is None:
+            return "n/a"
+        spread = "" if self.travel_half_width is None else f" ± {self.travel_half_width:.2f}"
+        return f"{self.travel_difference:+.2f}{spread} ({self.travel_n})"
+
+
+def side(outcomes: list[Outcome]) -> Side:
+    travel = [o.travel_time for o in outcomes if o.success and o.travel_time is not None]
+    rates = {name: 100.0 * sum(getattr(o, name) for o in outcomes) / len(outcomes) for name in FLAGS}
+    return Side(len(outcomes), rates, sum(travel) / len(travel) if travel else None)
+
+
+def versus(base: list[Outcome], other: list[Outcome]) -> Versus:
+    """``other`` against ``base``, the same episodes in the same order."""
+    pairs = list(zip(base, other, strict=True))
+    flags = {
+        name: Paired(
+            sum(getattr(o, name) and not getattr(b, name) for b, o in pairs),
+            sum(getattr(b, name) and not getattr(o, name) for b, o in pairs),
+            sum(getattr(b, name) and getattr(o, name) for b, o in pairs),
+            sum(not getattr(b, name) and not getattr(o, name) for b, o in pairs),
+        )
+        for name in FLAGS
+    }
+    differences = [
+        o.travel_time - b.travel_time
+        for b, o in pairs
+        if b.success and o.success and b.travel_time is not None and o.travel_time is not None
+    ]
+    mean = statistics.fmean(differences) if differences else None
+    n = len(differences)
+    half = t95(n - 1) * statistics.stdev(differences) / math.sqrt(n) if n > 1 else None
+    same = sum(b.same_metrics(o) for b, o in pairs)
+    return Versus(flags, mean, half, len(differences), same)
