@@ -286,7 +286,7 @@ def run(args: argparse.Namespace) -> int:
     recorded = read_run_settings(out) if args.resume else None
     started = checkpoint_record(out) if args.resume and recorded is None else recorded
     taken = take_run_options(args, started) + take_run_epochs(args, out, started)
-    data_taken = take_run_data(args, recorded)
+    data_taken = take_run_data(args, recorded, out)
     pooling, net_config, net_taken = resumed_net_config(args, started, pooling, net_config)
     try:
         _check_numbers(args)

@@ -205,17 +205,47 @@ def check_resumed_data(out: Path, recorded: dict[str, Any] | None, hashes: dict[
             )
 
 
-def take_run_data(args: argparse.Namespace, recorded: dict[str, Any] | None) -> list[str]:
+def take_run_data(args: argparse.Namespace, recorded: dict[str, Any] | None, out: Path) -> list[str]:
     """The defaults of --protocol and --dataset, but on a resume that types no data option the run's
     (``recorded``: its settings, ``data_settings``): its --train/--val/--test files, or its protocol and
-    dataset, and its data directory where neither --data-dir nor $CROWDMPC_DATA names one. Returns what
+    dataset, and its data directory where neither --data-dir nor $CROWDMPC_DATA names one; one that gives
+    other prepared files than the run's (in ``out``) is refused before anything is prepared. Returns what
     was taken that a new run would not have, as a resume names it. A run from before its data choice was
     recorded, or one a data option is typed for, takes nothing: its files are compared with those the
     options choose (``check_resumed_settings``), and a mismatch is refused."""
     taken = _taken_data(args, recorded)
     args.protocol = args.protocol or DEFAULT_PROTOCOL
     args.dataset = args.dataset or DEFAULT_DATASET
+    if args.resume and recorded is not None and args.train is None and args.val is None:
+        _check_resumed_data_dir(args, recorded, out)
     return taken
+
+
+def _check_resumed_data_dir(args: argparse.Namespace, recorded: dict[str, Any], out: Path) -> None:
+    """PipelineError when the data directory a resume reads (--data-dir, else $CROWDMPC_DATA, which the
+    run's does not override) gives other prepared files than the run trained on (``recorded``: its settings):
+    the resume prepared that directory's raw data first (minutes), then refused the files in a line cut
+    short that named no data directory. Said before anything is prepared; the same data in another folder,
+    which gives the same prepared files, passes."""
+    from predictors.data.locate import DATA_ENV, prepared_location, resolve_data_dir
+
+    held, files = recorded.get("data_dir"), recorded.get("files")
+    tested = _paths(files.get("test")) if isinstance(files, dict) else []
+    if not isinstance(held, str) or not held or len(tested) != 1:  # no protocol run's record
+        return
+    run_root = tested[0].parent.parent  # a protocol's test file: PREPARED/test/NAME.ndjson
+    directory = prepared_location(args.data_dir)
+    if directory is None or resolve_data_dir(args.data_dir).resolve() == Path(held):
+        return  # nothing to tell yet (prepared_dir says why), or the run's own directory
+    if directory.resolve() == run_root:
+        return
+    source = (
+        f"--data-dir {args.data_dir}" if args.data_dir is not None else f"${DATA_ENV} {os.environ[DATA_ENV]}"
+    )
+    raise PipelineError(
+        f"--resume: {out} was trained on the prepared data in {run_root} (data directory {held}); "
+        f"{source} gives {directory}: resume with --data-dir {held}"
+    )
 
 
 def _taken_data(args: argparse.Namespace, recorded: dict[str, Any] | None) -> list[str]:

@@ -212,10 +212,7 @@ def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool | None
             "`crowdmpc data prepare`) nor raw BIWI EWAP annotations (raw_ewap/seq_eth/obsmat.txt and "
             "raw_ewap/seq_hotel/obsmat.txt); see data/README.md"
         )
-    digest = hashlib.sha256(CONVERTER_VERSION.encode())
-    for seq in EWAP_SEQUENCES.values():
-        digest.update(sha256_file(raw / seq / "obsmat.txt").encode())
-    target = cache_root() / "prepared" / digest.hexdigest()[:16]
+    target = _cache_entry(raw)
     if read_manifest(target) is not None:
         return target
     writable_cache_dir("prepared")
@@ -238,6 +235,28 @@ def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool | None
         )
         _install_cache_entry(staging, target)
     return target
+
+
+def _cache_entry(raw: Path) -> Path:
+    """The cache entry the raw data in ``raw`` is prepared into, keyed by the converter and its content."""
+    digest = hashlib.sha256(CONVERTER_VERSION.encode())
+    for seq in EWAP_SEQUENCES.values():
+        digest.update(sha256_file(raw / seq / "obsmat.txt").encode())
+    return cache_root() / "prepared" / digest.hexdigest()[:16]
+
+
+def prepared_location(data_dir: str | Path | None) -> Path | None:
+    """Where ``prepared_dir(data_dir)`` reads the prepared files, found without preparing anything: the
+    folder itself when it holds a manifest, else its raw data's cache entry; None where that cannot be told
+    (no such folder, neither kind of data, an unreadable file), which ``prepared_dir`` then says."""
+    try:
+        directory = resolve_data_dir(data_dir)
+        if (directory / "manifest.json").is_file():
+            return directory
+        raw = raw_ewap_dir(directory)
+        return None if raw is None else _cache_entry(raw)
+    except (PredictorError, OSError):
+        return None
 
 
 def _entry_lock(target: Path) -> Path:

@@ -5,6 +5,8 @@ a resume whose $CROWDMPC_DATA was unset could not find the run's prepared files)
 from __future__ import annotations
 
 import json
+import os
+from pathlib import Path
 
 import pytest
 
@@ -104,3 +106,34 @@ def test_a_run_from_before_its_data_was_recorded_resumes_as_before(tmp_path, cap
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no data directory: pass --data-dir" in err
     assert _train(*files, "--epochs", "2", "--out", str(out), "--resume") == 0
+
+
+def test_a_resume_whose_data_directory_gives_other_files_is_refused_before_preparing(
+    tmp_path, capsys, monkeypatch
+):
+    """A run trained with --data-dir on prepared data, resumed in a shell whose $CROWDMPC_DATA names the raw
+    data (as the README has it set): the resume prepared that raw data (minutes) and then refused the run's
+    files in a line cut short ("files: run {...}, now {...}") that named no data directory."""
+    prepared = tmp_path / "prepared"
+    prepare_ewap(write_tiny_ewap(tmp_path / "data"), prepared, categorize_scenes=False, log=lambda msg: None)
+    out = tmp_path / "run"
+    monkeypatch.delenv("CROWDMPC_DATA", raising=False)
+    common = ["--batch-size", "4", "--limit-batches", "1", "--out", str(out)]
+    assert _train("--data-dir", str(prepared), "--epochs", "1", *common) == 0
+    capsys.readouterr()
+
+    monkeypatch.setenv("CROWDMPC_DATA", str(tmp_path / "data"))  # the raw data, not yet in the cache
+    assert _train("--epochs", "2", "--out", str(out), "--resume") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert f"trained on the prepared data in {prepared.resolve()}" in err
+    assert f"$CROWDMPC_DATA {tmp_path / 'data'}" in err and f"--data-dir {prepared.resolve()}" in err
+
+    assert not (Path(os.environ["CROWDMPC_CACHE"]) / "prepared").exists()  # nothing was prepared
+
+    # a --data-dir typed that gives other files: the same line, naming the option
+    assert _train("--data-dir", str(tmp_path / "data"), "--epochs", "2", "--out", str(out), "--resume") == 2
+    assert f"--data-dir {tmp_path / 'data'} gives" in capsys.readouterr().err
+    # the run's data directory, by the environment or typed: the resume goes on
+    monkeypatch.setenv("CROWDMPC_DATA", str(prepared))
+    assert _train("--epochs", "2", "--out", str(out), "--resume") == 0
