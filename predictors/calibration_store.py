@@ -38,6 +38,8 @@ from predictors.zoo import (
 
 CALIBRATIONS_FORMAT: Final[str] = "crowdmpc-calibrations"
 CALIBRATIONS_VERSION: Final[int] = 1
+# the model kind of a predictor's zoo entry as a caller located it (None: no entry; ...: located when needed)
+ModelKind = str | None | EllipsisType
 
 
 def calibrations_path(directory: str | Path | None = None) -> Path:
@@ -330,9 +332,11 @@ def locate_calibration(
     sha256: str | None | EllipsisType = ...,
     sensor_range: float | None = None,
     sensor_tracks: bool = True,
+    kind: ModelKind = ...,
 ) -> tuple[Path, Calibration]:
     """``(file, block)``: the block ``find_calibration`` gives and the calibrations file holding it, which
-    tells a user's block from a shipped one (``calibration_zoo``)."""
+    tells a user's block from a shipped one (``calibration_zoo``). ``kind``: as ``recalibrate_command``
+    takes it, for the command a refusal quotes."""
     check_alpha(alpha)
     if source not in SOURCES:
         raise PredictorError(f"unknown calibration source {source!r}; choose from {list(SOURCES)}")
@@ -345,12 +349,12 @@ def locate_calibration(
         files = " or ".join(str(p) for p in calibration_files(directory))
         raise PredictorError(
             f"no {source} calibration at alpha={alpha_text(alpha)} for predictor {predictor!r} in "
-            f"{files}{have}; run: {recalibrate_command(predictor, source, alpha, *wanted)}"
+            f"{files}{have}; run: {recalibrate_command(predictor, source, alpha, *wanted, kind=kind)}"
         )
     path, block = min(found, key=lambda found: view_distance(found[1].key()[3:], wanted))
     expected = current_sha256(predictor, directory) if sha256 is ... else sha256
     if block.predictor_sha256 != expected:
-        command = recalibrate_command(predictor, source, alpha, block.sensor_range, block.sensor_tracks)
+        command = recalibrate_command(predictor, source, alpha, *block.key()[3:], kind=kind)
         behind = _behind(block.sensor_range, block.sensor_tracks)
         raise PredictorError(
             f"{path}: the {source} calibration at alpha={alpha_text(alpha)}{behind} of "

@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 
     from pipelines.config import RunConfig
     from pipelines.loop.controllers import ControllerSpec
-    from pipelines.loop.margins import Located
+    from pipelines.loop.margins_read import Planned as Lookup
     from predictors.calibration import Calibration
     from predictors.manifest import ZooEntry
 
@@ -29,13 +29,16 @@ if TYPE_CHECKING:
 def calibration_notes(
     spec: ControllerSpec,
     config: RunConfig,
-    located: Located | None | EllipsisType = ...,
+    located: Lookup | EllipsisType = ...,
     entry: Entry = ...,
 ) -> list[str]:
     """Every note above for a simulate run of ``spec`` under ``config``, of the block its controller plans
-    with as the run read it (``located``: ``MarginSpec.located``'s; ``...``: each note looks it up) and of
-    its predictor's zoo ``entry`` as the run located it (``...``: a note quoting a command locates it)."""
-    block = located if located is ... or located is None else located[1]
+    with as the run read it (``located``: ``margins_read.look_up``'s, of a refusal the block it refused;
+    ``...``: each note looks it up) and of its predictor's zoo ``entry`` as the run located it (``...``: a
+    note quoting a command locates it)."""
+    from pipelines.loop.margins_read import block_of
+
+    block = block_of(located)
     env, sim = config.env, config.simulate
     view = sim.sensor_range, sim.sensor_tracks
     visibility = "visible" if env.robots_visible else "invisible"

@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from crowdsim.world import WorldFacts
     from pipelines.config import RunConfig
     from pipelines.loop.controllers import ControllerReads, ControllerSpec
-    from pipelines.loop.margins import Located
+    from pipelines.loop.margins_read import Planned
     from predictors.base import Predictor
     from predictors.manifest import ZooEntry
     from predictors.zoo import Located as ZooLocated
@@ -68,12 +68,15 @@ def read_predictor(spec: ControllerSpec) -> PredictorRead:
 
 
 def planned_calibration(
-    spec: ControllerSpec, model: Predictor | None, world: WorldFacts
-) -> Located | None | EllipsisType:
+    spec: ControllerSpec, model: Predictor | None, world: WorldFacts, entry: ZooEntry | None = None
+) -> Planned | EllipsisType:
     """``spec.margins.located`` as the MPC of ``spec`` (behind the run's sensor) built in ``world`` reads it
-    with ``model``: the block its notes describe and it plans with. ``...`` where ``model`` was not loaded
-    here or the lookup refuses: the controller reads it and refuses after its own checks (the world's
-    sampling time first: the cause, not a symptom)."""
+    with ``model`` (of the zoo ``entry``, None: a registered predictor): the block its notes describe and it
+    plans with, or its ``Refused``, which the controller raises after its own checks (the world's sampling
+    time first: the cause, not a symptom), the notes describing the block it refused, as they did when
+    each looked it up. ``...`` where ``model`` was not loaded here or the MPC's settings refuse: the
+    controller reads it."""
+    from pipelines.loop.margins_read import look_up
     from pipelines.loop.mpc_setup import mpc_config
     from predictors.registry import loaded_sha256
 
@@ -81,9 +84,10 @@ def planned_calibration(
         return ...
     try:
         horizon = mpc_config(spec, world=world).horizon
-        return spec.margins.located(model.name, horizon, loaded_sha256(model))
     except (PipelineError, PredictorError):
         return ...
+    kind = None if entry is None else entry.model
+    return look_up(spec.margins, model.name, horizon, loaded_sha256(model), kind)
 
 
 def read_once(
@@ -96,7 +100,7 @@ def read_once(
     read = read or read_predictor(spec)
     behind = spec.behind(config.simulate.sensor_range, config.simulate.sensor_tracks)
     return read.entry, ControllerReads(
-        read.model, planned_calibration(behind, read.model, config.env.world())
+        read.model, planned_calibration(behind, read.model, config.env.world(), read.entry)
     )
 
 

@@ -21,6 +21,7 @@ from pipelines.commands.simulate_checks import horizon_note, size_note, toleranc
 from pipelines.commands.team_notes import flock_note, goal_room_note, separate_goals_note
 from pipelines.config.schema import MPC_FROM_WORLD
 from pipelines.errors import PipelineError
+from pipelines.loop.margins_read import Refused, block_of, look_up
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Mapping
@@ -29,7 +30,7 @@ if TYPE_CHECKING:
     from pipelines.config import RunConfig
     from pipelines.experiments.cells import Experiment
     from pipelines.experiments.tasks import Cell
-    from pipelines.loop.margins import Located
+    from pipelines.loop.margins_read import Planned
     from predictors.base import Predictor
     from predictors.manifest import ZooEntry
 
@@ -39,8 +40,9 @@ class PlanModels(NamedTuple):
 
     loaded: dict[str, Predictor]  # the zoo models the plan's methods plan with, by name
     entries: dict[str, ZooEntry]  # the zoo entry each of them loads (a registered predictor has none)
-    # the calibration block each method plans with, by label (``check_margins``'), None: not checked yet
-    blocks: dict[str, Located | None] | None = None
+    # the calibration block each method plans with, by label, or its refusal (``planned_margins``'), None:
+    # not looked up yet
+    blocks: dict[str, Planned] | None = None
 
 
 def check_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None = None) -> PlanModels:
@@ -116,8 +118,8 @@ def noted_models(experiment: Experiment, cfg: RunConfig | None, cells: Iterable[
         for note in method_notes(cells):
             print(note, file=sys.stderr)
         raise
-    try:
-        models = models._replace(blocks=check_margins(experiment, models.loaded))
+    try:  # a refusal kept for check_plan to raise after the couplings' check
+        models = models._replace(blocks=planned_margins(experiment, models.loaded, models.entries))
     except (PipelineError, ValueError, OSError):  # check_plan runs it again, after the couplings' check
         pass
     for note in method_notes(cells, models.entries, models.blocks):
@@ -136,7 +138,8 @@ def check_plan(
     With the run's ``cfg``, a refusal of a value the run chose names where it chose it first ("run.toml:
     mpc.d_min: method 'CMPC' of ..."), as simulate's do: they named the method alone, and a file's value
     looked like one of the experiment's. ``models``: ``check_predictors``' as ``noted_models`` made them
-    (None: made here), with the blocks ``check_margins`` located where it passed there (not checked again)."""
+    (None: made here), with the blocks ``planned_margins`` looked up there, or their refusal (not looked up
+    again: its refusal is raised in its turn)."""
     from pipelines.loop.spec import controller_names
 
     controller_names()
@@ -149,8 +152,8 @@ def check_plan(
             (("controller", "coupling"), ("controller", "predictor"), ("sweep", "predictors")),
         ),
         (
-            # passed in noted_models, whose notes describe the blocks it located: not read again
-            (lambda _: None) if models.blocks is not None else partial(check_margins, loaded=loaded),
+            # looked up in noted_models, whose notes describe the blocks it located: not read again
+            partial(check_margins, loaded=loaded, entries=models.entries, planned=models.blocks),
             (("controller", "margins"), ("mpc", "horizon"), *SENSING_KEYS),
         ),
         (check_contact_distances, (("mpc", "d_min"),)),
@@ -258,20 +261,40 @@ def _each_mpc(experiment: Experiment, check: Callable[[MPCConfig], None], refusa
 
 
 def check_margins(
-    experiment: Experiment, loaded: Mapping[str, Predictor] | None = None
-) -> dict[str, Located | None]:
+    experiment: Experiment,
+    loaded: Mapping[str, Predictor] | None = None,
+    entries: Mapping[str, ZooEntry] | None = None,
+    planned: Mapping[str, Planned] | None = None,
+) -> None:
     """Every method's margins resolve (a calibration that matches the weights, with per-class margins for the
     per-human modes) before workers start; refused with the method named, as the other checks are: --vary
     mpc.horizon=4,6 with conformal margins was told to 'plan with a horizon of at most 4 (mpc.horizon)',
-    a setting it never gave, without the column that asked for 6. ``loaded``: as ``check_couplings``'; the
-    margins are looked up for the weights those hold (the manifest, read again, may name others). Returns
-    the block each method plans with (``MarginSpec.located``'s), by label, for its notes."""
+    a setting it never gave, without the column that asked for 6. ``planned``: ``planned_margins``' (None:
+    looked up here, of ``loaded`` and ``entries``), whose first refusal in the experiment's order is
+    raised."""
+    planned = planned_margins(experiment, loaded, entries) if planned is None else planned
+    for at in planned.values():
+        if isinstance(at, Refused):
+            raise at.error
+
+
+def planned_margins(
+    experiment: Experiment,
+    loaded: Mapping[str, Predictor] | None = None,
+    entries: Mapping[str, ZooEntry] | None = None,
+) -> dict[str, Planned]:
+    """The block each method plans with (``MarginSpec.located``'s), by label, for ``check_margins`` and the
+    notes, a method's refusal kept as a ``Refused`` of the block it refused: the notes of a refused plan
+    looked each block up again (the manifest, then calibrations.json, once a note and method), and the
+    check once more. ``loaded``: as ``check_couplings``'; the margins are looked up for the weights those
+    hold (the manifest, read again, may name others). ``entries``: ``check_predictors``', whose model kinds
+    the calibrate command a refusal quotes registers (None: that command locates it)."""
     from pipelines.loop.mpc_setup import mpc_config
     from predictors.registry import checkpoint_sha256, loaded_sha256
 
     loaded = loaded or {}
-    blocks: dict[tuple[Any, ...], Any] = {}  # Table II's CMPC and DMPC plan with one block: read once
-    planned: dict[str, Located | None] = {}
+    blocks: dict[tuple[Any, ...], Planned] = {}  # Table II's CMPC and DMPC plan with one block: read once
+    planned: dict[str, Planned] = {}
     for label, spec in experiment.methods:
         name = spec.predictor_name
         predictor = loaded.get(name) if name is not None else None
@@ -279,15 +302,20 @@ def check_margins(
         horizon = mpc_config(spec).horizon
         world = experiment.method_worlds.get(label, experiment.world)
         margins = spec.margins.behind(world.sensor_range, world.sensor_tracks)
-        try:
-            key = (margins, name, horizon, sha256)
-            if key not in blocks:  # the calibrations read once, as the controller does
-                blocks[key] = margins.located(name, horizon, sha256)
-            at = blocks[key]
-            margins.resolve(name, horizon, sha256, at)
-            margins.resolve_classes(name, horizon, sha256, at)
-        except PipelineError as exc:
-            raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
+        entry = None if entries is None else entries.get(name or "")
+        kind = ... if entries is None else None if entry is None else entry.model
+        key = (margins, name, horizon, sha256)
+        if key not in blocks:  # the calibrations read once, as the controller does
+            blocks[key] = look_up(margins, name, horizon, sha256, kind)
+        at = blocks[key]
+        if not isinstance(at, Refused):
+            try:
+                margins.resolve(name, horizon, sha256, at)  # fixed margins: one a step
+            except PipelineError as exc:
+                at = Refused(exc, at)
+        if isinstance(at, Refused) and isinstance(at.error, PipelineError):  # a PredictorError as it is
+            named = PipelineError(f"method {label!r} of experiment {experiment.name!r}: {at.error}")
+            at = Refused(named, at.found)
         planned[label] = at
     return planned
 
@@ -295,7 +323,7 @@ def check_margins(
 def method_notes(
     cells: Iterable[Cell],
     entries: Mapping[str, ZooEntry] | None = None,
-    blocks: Mapping[str, Located | None] | None = None,
+    blocks: Mapping[str, Planned] | None = None,
 ) -> list[str]:
     """simulate's ``separate_goals_note`` lines (robots trading places whom every pair flocking holds
     together: each worker's controller said it, and leaves it out now), ``goal_room_note`` lines (a d_min
@@ -310,7 +338,8 @@ def method_notes(
     the methods it applies to: a grid of --vary columns printed the same line for each of eight methods.
     ``entries``: the zoo entry each zoo predictor loads, located already (``check_predictors``'; None:
     located here; the calibrate commands the notes quote take its model kind from it); ``blocks``: the block
-    each method plans with, by label (``check_margins``'; None: each calibration note looks it up)."""
+    each method plans with, by label (``planned_margins``', the block a refusal is of; None: each
+    calibration note looks it up)."""
     methods: dict[str, list[str]] = {}  # a note's text -> the methods it applies to, in table order
     seen: set[str] = set()
     cells = list(cells)
@@ -327,9 +356,8 @@ def method_notes(
             continue
         seen.add(cell.method)
         env = cell.world.env_config()
-        at = ... if blocks is None else blocks.get(cell.method, ...)
         view = cell.world.sensor_range, cell.world.sensor_tracks
-        block = at if at is ... or at is None else at[1]
+        block = block_of(... if blocks is None else blocks.get(cell.method, ...))
         entry = located[cell.spec.predictor_name]
         for note in (
             separate_goals_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),

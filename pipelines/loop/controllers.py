@@ -48,7 +48,7 @@ if TYPE_CHECKING:
     from types import EllipsisType
 
     from crowdsim.env import Observation
-    from pipelines.loop.margins import Located
+    from pipelines.loop.margins_read import Planned
     from predictors.base import Predictor
 
 # The spec and the controllers' facts live in pipelines.loop.spec (the MPC adapter needs them, and the
@@ -104,7 +104,7 @@ class ControllerReads:
     plugin reads its own."""
 
     predictor: Predictor | None = None  # the one spec.predictor names; None: loaded as the MPC is built
-    calibration: Located | None | EllipsisType = ...  # spec.margins.located of its weights; ...: read then
+    calibration: Planned | EllipsisType = ...  # margins_read.look_up of its weights; ...: read then
 
 
 # (spec, env_config, jit, what the command read for it) -> controller

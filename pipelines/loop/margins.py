@@ -41,6 +41,7 @@ if TYPE_CHECKING:
 
     from crowdsim.env import Observation
     from predictors.calibration import Calibration
+    from predictors.calibration_store import ModelKind as Kind
     from predictors.conformal_classes import ClassMargins
 
     Located = tuple[Path, Calibration]  # a calibrations file and the block of it planned with
@@ -222,7 +223,12 @@ class MarginSpec:
         return table
 
     def _located(self, predictor: str | None, horizon: int, sha256: str | None) -> Located:
-        """The calibrations file holding the block planned with, and the block."""
+        at = self.stored(predictor, sha256)  # the calibrations file holding the block planned with, and it
+        self.check_planned(at, at[1].predictor, horizon)
+        return at
+
+    def stored(self, predictor: str | None, sha256: str | None, kind: Kind = ...) -> Located:
+        """``located``'s file and block, unchecked against the horizon; ``kind``: ``locate_calibration``'s."""
         if predictor is None:
             raise PipelineError("conformal margins need a predictor; this controller uses none")
         from predictors.calibration_store import locate_calibration
@@ -235,19 +241,22 @@ class MarginSpec:
                 f"the ORCA oracle knows the simulator, not real people, so it has no real calibration: plan "
                 f"with its closed-loop one (margins conformal:{alpha_text(self.alpha)}) or leave it out"
             )
-
-        path, block = locate_calibration(
+        return locate_calibration(
             predictor,
             self.source,
             self.alpha,
             sha256=sha256,
             sensor_range=self.sensor_range,
             sensor_tracks=self.sensor_tracks,
+            kind=kind,
         )
+
+    def check_planned(self, at: Located, predictor: str, horizon: int, kind: Kind = ...) -> None:
+        """PipelineError unless the block ``stored`` gave covers ``horizon`` steps within ``MAX_MARGIN``."""
+        path, block = at
         if len(block.quantiles) < horizon:
-            raise PipelineError(_short_horizon(self, predictor, len(block.quantiles), horizon))
+            raise PipelineError(_short_horizon(self, predictor, len(block.quantiles), horizon, kind))
         self._check_width(block, path, predictor, horizon)
-        return path, block
 
     def _check_width(self, block: Calibration, path: Path, predictor: str, horizon: int) -> None:
         """PipelineError when a margin this mode plans with (its first ``horizon`` steps) is past
@@ -272,8 +281,8 @@ class MarginSpec:
         sha256, the zoo whose file holds it ("shipped" or "user": a user's block of a key hides the shipped
         one) and, closed-loop, the conventions its episodes ran under (one block is kept per predictor,
         alpha and sensor range: a recalibration replaces it) and its crowd sizes, with the sensor range its
-        robots were behind where they were and whether its tracker reported track lengths.
-        None for margins that need none. ``at``: as ``resolve``'s."""
+        robots were behind where they were and whether its tracker reported track lengths. None for margins
+        that need none. ``at``: as ``resolve``'s."""
         if self.mode not in CALIBRATED_MODES:
             return None
         from predictors.calibration_store import calibration_zoo
@@ -359,7 +368,7 @@ def _closed_loop_only(mode: str) -> str:
     return why
 
 
-def _short_horizon(spec: MarginSpec, predictor: str, covered: int, horizon: int) -> str:
+def _short_horizon(spec: MarginSpec, predictor: str, covered: int, horizon: int, kind: Kind = ...) -> str:
     """Why a calibration of ``covered`` steps cannot give the margins of a ``horizon``-step MPC, and what
     does: closed-loop calibration predicts with the MPC's default horizon (``crowdmpc calibrate`` cannot
     change it), so only real scenes can be calibrated at another horizon, and the per-class modes cannot
@@ -372,7 +381,7 @@ def _short_horizon(spec: MarginSpec, predictor: str, covered: int, horizon: int)
         f"the {spec.source} calibration of {predictor!r} at alpha={alpha} covers {covered} steps, the MPC's "
         f"horizon is {horizon}"
     )
-    real = f"{recalibrate_command(predictor, 'real', spec.alpha)} --horizon {horizon}"
+    real = f"{recalibrate_command(predictor, 'real', spec.alpha, kind=kind)} --horizon {horizon}"
     if spec.source == "real":
         return f"{why}; recalibrate the real scenes at that horizon: {real}"
     closed = (

@@ -41,6 +41,7 @@ from mpc.nlp import StepData
 from mpc.parked import yield_slack
 from mpc.stall import StallWatch
 from pipelines.errors import NoTwinWarning, PipelineError, act_before_reset, interrupt_behind
+from pipelines.loop.margins_read import Refused, as_planned
 from pipelines.loop.mpc_setup import (
     SolversHeld,
     check_coupling,
@@ -81,10 +82,10 @@ class MPCController(SolversHeld):
         env_config: EnvConfig | None = None,
         jit: bool = False,
         predictor: Predictor | None = None,
-        calibration: Located | None | EllipsisType = ...,
+        calibration: Located | None | Refused | EllipsisType = ...,
     ):
         """``env_config``: the simulator's settings, for a predictor that observes it (the ORCA oracle);
-        ``predictor``, ``calibration``: spec's predictor and its ``spec.margins.located``, read already."""
+        ``predictor``, ``calibration``: spec's predictor and block (``look_up``'s), read already."""
         from crowdsim.env_config import EnvConfig
 
         if distributed and spec.coupling == "nlp":  # refused before a predictor is loaded for it
@@ -101,7 +102,7 @@ class MPCController(SolversHeld):
         check_margins_world(spec, world)  # before the calibration is looked up: the cause, not a symptom
         cfg = mpc_config(spec, jit, world)
         self.predictor_sha256 = sha256 = loaded_sha256(self.model)  # of the weights loaded, read with them
-        at = spec.margins.located(self.model.name, cfg.horizon, sha256) if calibration is ... else calibration
+        at = as_planned(spec.margins, calibration, self.model.name, cfg.horizon, sha256)  # read once, or here
         self.cfg = cfg.replace(human_margins=spec.margins.resolve(self.model.name, cfg.horizon, sha256, at))
         # conformal-motion and -shortfall: a margin per human and step from its motion class, every step
         self.class_margins = spec.margins.resolve_classes(self.model.name, cfg.horizon, sha256, at)
@@ -159,8 +160,7 @@ class MPCController(SolversHeld):
         itself: the NLP (compiled with ``jit``) and every solver instance a solve may call, the predictor's
         CasADi twin and its exported encoder. On a real robot the number of humans changes as people come
         and go; a step meeting a size not prepared builds it (seconds with ``jit`` and a cold cache).
-        Returns the seconds each size took, ``(n_robots, n_humans) -> s``; a size built already costs ~0.
-        """
+        Returns the seconds each size took, ``(n_robots, n_humans) -> s``; a size built already costs ~0."""
         sizes = prepare_sizes(n_robots, n_humans)
         seconds: dict[tuple[int, int], float] = {}
         for m, n in sizes:

@@ -208,3 +208,65 @@ def test_the_calibrate_commands_the_notes_quote_read_no_manifest_again(tmp_path,
     assert main(["simulate", *run]) == 0
     assert capsys.readouterr().err.count(quoted) == 2  # the world and controller notes
     assert opened[manifest] == 1
+
+
+def test_a_refused_simulate_reads_the_manifest_and_calibrations_once(tmp_path, monkeypatch, capsys):
+    """A lookup of the calibration block that refused was left to the controller: each calibration note
+    looked it up again (the manifest for the weights' sha256, then calibrations.json), each refusal's
+    calibrate command located the entry again, and the controller looked it up once more, so `simulate
+    --margins conformal:0.37` (no block at that alpha) read the manifest 13 times and calibrations.json 7
+    times before its one line."""
+    from pipelines.cli import main
+    from predictors import zoo
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    shipped = zoo.checkpoints_dir().resolve()
+    opened = count_opens(monkeypatch, ".json", ".pt")
+    run = ["--humans", "2", "--robots", "1", "--episodes", "1", "--no-progress"]
+    name = "social_lstm_eth"
+    assert (
+        main(["simulate", "--controller", "cmpc", "--predictor", name, *run, "--margins", "conformal:0.37"])
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert f"no closed-loop calibration at alpha=0.37 for predictor {name!r}" in err
+    assert err.strip().endswith(
+        f"run: crowdmpc calibrate --predictor {name} --source closed-loop --alpha 0.37"
+    )
+    read = {path.name: n for path, n in opened.items() if path.parent == shipped}
+    assert read == {"manifest.json": 1, f"{name}.json": 1, f"{name}.pt": 1, "calibrations.json": 1}
+
+
+def test_a_simulate_refused_a_blocks_horizon_notes_that_block_reading_it_once(tmp_path, monkeypatch, capsys):
+    """A block of too few steps for the MPC's horizon is refused by the controller, after the notes on that
+    block (which looked it up themselves, five times): they are printed as before, of the block read once."""
+    from pipelines.cli import main
+    from predictors import zoo
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    shipped = zoo.checkpoints_dir().resolve()
+    opened = count_opens(monkeypatch, ".json")
+    run = ["--humans", "2", "--robots", "1", "--episodes", "1", "--no-progress", "--set", "mpc.horizon=14"]
+    run += ["--margins", "conformal:0.1"]  # calibrated for 4 steps
+    assert main(["simulate", "--controller", "cmpc", "--predictor", "social_lstm_eth", *run]) == 2
+    err = capsys.readouterr().err
+    assert err.index("were calibrated with 3 robots among 5-9 humans") < err.index("covers 4 steps"), err
+    assert opened[shipped / "manifest.json"] == 1
+    assert opened[shipped / "calibrations.json"] == 1
+
+
+def test_a_refused_sweep_plan_reads_the_manifest_and_calibrations_once(tmp_path, monkeypatch, capsys):
+    """check_margins refused before the notes were printed, so each of the notes looked the block up again
+    (once a note and method) and check_plan's own check_margins once more: the coupling experiment's dry run
+    with --margins conformal:0.37 read the manifest 33 times and calibrations.json 17 times."""
+    from pipelines.cli import main
+    from predictors import zoo
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    shipped = zoo.checkpoints_dir().resolve()
+    opened = count_opens(monkeypatch, ".json")
+    plan = ["--experiment", "coupling", "--humans", "5", "--episodes", "1", "--margins", "conformal:0.37"]
+    assert main(["sweep", *plan, "--dry-run", "--out", str(tmp_path / "sweep")]) == 2
+    assert "no closed-loop calibration at alpha=0.37" in capsys.readouterr().err
+    assert opened[shipped / "manifest.json"] == 1
+    assert opened[shipped / "calibrations.json"] == 1

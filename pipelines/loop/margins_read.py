@@ -1,0 +1,80 @@
+"""The calibration block some margins plan with, looked up once for a command's notes and for what plans with
+it, a refusal included: a lookup that refused was made again by each calibration note (the manifest for the
+weights' sha256, then calibrations.json) and once more where the refusal is raised, so `simulate --margins
+conformal:0.37` read manifest.json 13 times and calibrations.json 7 times before its one line."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from pipelines.errors import PipelineError
+from predictors.errors import PredictorError, short_repr
+
+if TYPE_CHECKING:
+    from types import EllipsisType
+
+    from pipelines.loop.margins import Located, MarginSpec
+    from predictors.calibration import Calibration
+    from predictors.calibration_store import ModelKind
+
+
+@dataclass(frozen=True)
+class Refused:
+    """A lookup of the block some margins plan with that refused. ``error`` is raised where the block would
+    be planned with (the controller, after its own checks; a sweep's margins check, after the couplings'),
+    so the refusal and what comes before it read as they did; the notes describe ``found``, the block stored
+    for the predictor, alpha and view (one of too few steps, a margin too wide, no per-class margins), None
+    where none was found (the refusal says so)."""
+
+    error: Exception
+    found: Located | None = None
+
+    def __post_init__(self):
+        if not isinstance(self.error, Exception):
+            raise PipelineError(f"Refused.error must be an exception, got {short_repr(self.error)}")
+        if self.found is not None and not (isinstance(self.found, tuple) and len(self.found) == 2):
+            raise PipelineError(f"Refused.found must be a (file, block) pair or None, got {self.found!r:.80}")
+
+
+if TYPE_CHECKING:
+    Planned = Located | None | Refused  # what a lookup gave: the block, None (no block needed), a refusal
+
+
+def look_up(
+    margins: MarginSpec, predictor: str | None, horizon: int, sha256: str | None, kind: ModelKind = ...
+) -> Planned:
+    """``margins.located`` as a controller of ``horizon`` steps planning with ``predictor`` (its weights'
+    ``sha256``) reads it, with its per-class margins (``resolve_classes``); a refusal of either (a
+    ``PipelineError`` or ``PredictorError``) comes back as ``Refused``, other errors go on. ``kind``: that of
+    ``predictor``'s zoo entry, as the caller located it, for the calibrate command a refusal quotes."""
+    from pipelines.loop.margins import CALIBRATED_MODES
+
+    if margins.mode not in CALIBRATED_MODES:
+        return None
+    try:
+        at = margins.stored(predictor, sha256, kind)
+    except (PipelineError, PredictorError) as exc:
+        return Refused(exc)
+    try:
+        margins.check_planned(at, at[1].predictor, horizon, kind)
+        margins.resolve_classes(predictor, horizon, sha256, at)
+    except (PipelineError, PredictorError) as exc:
+        return Refused(exc, at)
+    return at
+
+
+def as_planned(
+    margins: MarginSpec, read: Planned | EllipsisType, predictor: str, horizon: int, sha256: str | None
+) -> Located | None:
+    """The block a controller plans with: ``read`` as its command read it (``...``: read here), the refusal
+    of a ``Refused`` raised now, at the controller's turn."""
+    if isinstance(read, Refused):
+        raise read.error
+    return margins.located(predictor, horizon, sha256) if read is ... else read
+
+
+def block_of(read: Planned | EllipsisType) -> Calibration | None | EllipsisType:
+    """The block the calibration notes describe of a lookup's result (``...``: none made, they look it up)."""
+    found = read.found if isinstance(read, Refused) else read
+    return found if found is ... or found is None else found[1]
