@@ -9,7 +9,9 @@ zoo entry of a plugin's model kind loads once the plugin is registered (``predic
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+from collections.abc import Callable, Iterator, Mapping
+from contextvars import ContextVar
 
 from predictors import zoo
 from predictors.base import PRED_LEN, Predictor
@@ -78,12 +80,32 @@ def never_loads(located: zoo.Located) -> str | None:
     return zoo.never_loads_line(located, "a shipped model") if zoo.shadowed(located) else None
 
 
+# the zoo entries a command located already, by name, which ``load_predictor`` loads within ``handing``
+_HANDED: ContextVar[Mapping[str, zoo.Located] | None] = ContextVar("handed_zoo_entries", default=None)
+
+
+@contextlib.contextmanager
+def handing(located: zoo.Located | None) -> Iterator[None]:
+    """Within the block, ``load_predictor`` of ``located``'s name loads ``located`` (its files checked against
+    it, as ``zoo.load_located`` checks them) without reading the manifests again; None hands nothing. A plugin
+    controller loading the run's predictor itself located it again after simulate had, for its notes: the
+    manifest read twice, and a `zoo add --replace` between had the notes describe another model."""
+    handed = dict(_HANDED.get() or {})
+    if located is not None:
+        handed[located.entry.name] = located
+    token = _HANDED.set(handed)
+    try:
+        yield
+    finally:
+        _HANDED.reset(token)
+
+
 def load_predictor(name: str) -> Predictor:
     if not isinstance(name, str):  # a list was "unhashable type: 'list'"
         raise UnknownPredictor(name, available())
     if name in PREDICTORS:
         return PREDICTORS[name]()
-    located = zoo.locate(name)
+    located = (_HANDED.get() or {}).get(name) or zoo.locate(name)
     if located is not None:
         return zoo.load_located(located)
     raise UnknownPredictor(name, available())

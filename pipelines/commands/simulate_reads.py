@@ -94,14 +94,14 @@ def read_once(
     read: PredictorRead | None, spec: ControllerSpec, config: RunConfig
 ) -> tuple[ZooEntry | None, ControllerReads]:
     """The zoo entry simulate's notes describe and what its controller plans with, read once: the predictor
-    as ``read`` (the checks') holds it, else read here, and the block its margins plan with."""
+    as ``read`` (the checks') holds it, else read here (a plugin loads the entry located here), and the
+    block its margins plan with."""
     from pipelines.loop.controllers import ControllerReads
 
     read = read or read_predictor(spec)
     behind = spec.behind(config.simulate.sensor_range, config.simulate.sensor_tracks)
-    return read.entry, ControllerReads(
-        read.model, planned_calibration(behind, read.model, config.env.world(), read.entry)
-    )
+    calibration = planned_calibration(behind, read.model, config.env.world(), read.entry)
+    return read.entry, ControllerReads(read.model, calibration, read.located)
 
 
 def _registered(name: str) -> bool:

@@ -50,6 +50,7 @@ if TYPE_CHECKING:
     from crowdsim.env import Observation
     from pipelines.loop.margins_read import Planned
     from predictors.base import Predictor
+    from predictors.zoo import Located as ZooLocated
 
 # The spec and the controllers' facts live in pipelines.loop.spec (the MPC adapter needs them, and the
 # registry needs the adapter); they are re-exported here, the registry's public face.
@@ -101,10 +102,13 @@ class ControllerReads:
     """What a shipped MPC reads of the zoo as it is built, read already by the command that builds it
     (simulate, whose notes describe them): read again, a `zoo add --replace` or a calibrate run between the
     reads had the notes describe other weights or another block than the controller planned with. A
-    plugin reads its own."""
+    plugin loads its own predictor, of the entry located already (``located``)."""
 
     predictor: Predictor | None = None  # the one spec.predictor names; None: loaded as the MPC is built
     calibration: Planned | EllipsisType = ...  # margins_read.look_up of its weights; ...: read then
+    # the zoo entry spec.predictor names, as the command located it (None: none; ...: not located), which a
+    # plugin that loads the run's predictor itself loads (predictors.registry.handing)
+    located: ZooLocated | None | EllipsisType = ...
 
 
 # (spec, env_config, jit, what the command read for it) -> controller
@@ -177,18 +181,27 @@ def make_controller(
     if is_shipped(spec.controller):
         controller_names()  # PipelineError when an installed entry point takes its name
         return CONTROLLERS[spec.controller](spec, env_config, jit, read or ControllerReads())
-    return _build_plugin(controller_plugin(spec.controller), spec, env_config, jit)
+    return _build_plugin(controller_plugin(spec.controller), spec, env_config, jit, read or ControllerReads())
 
 
 def _build_plugin(
-    plugin: ControllerPlugin, spec: ControllerSpec, env_config: EnvConfig | None, jit: bool
+    plugin: ControllerPlugin,
+    spec: ControllerSpec,
+    env_config: EnvConfig | None,
+    jit: bool,
+    read: ControllerReads,
 ) -> Controller:
     """``plugin.cls(spec, env_config, jit=jit)``; a constructor that fails, or builds something without a
     ``name`` and a ``predictor``, or whose ``predictor`` is not the one the run's records and cell keys name
     (``spec.predictor`` for a plugin with ``uses_predictor``, else None), is a one-line PipelineError naming
     the plugin. An unknown ``spec.predictor`` is refused first for a plugin with ``uses_predictor``, as the
-    shipped MPCs refuse it when they load it (``UnknownPredictor``)."""
-    if plugin.kind.uses_predictor:
+    shipped MPCs refuse it when they load it (``UnknownPredictor``); one whose zoo entry the command located
+    (``read.located``) is known, and the plugin's ``load_predictor`` of it loads that entry."""
+    from predictors.registry import handing
+
+    located = read.located if read.located is not ... and read.located is not None else None
+    located = located if located is not None and located.entry.name == spec.predictor else None
+    if plugin.kind.uses_predictor and located is None:
         from predictors.errors import UnknownPredictor
         from predictors.registry import available
 
@@ -196,7 +209,8 @@ def _build_plugin(
         if spec.predictor not in names:
             raise UnknownPredictor(spec.predictor, names)
     try:
-        controller = plugin.cls(spec, env_config, jit=jit)
+        with handing(located):
+            controller = plugin.cls(spec, env_config, jit=jit)
     except PipelineError:
         raise
     except Exception as exc:  # the plugin's own validation (TypeError, ValueError, an assert ...)

@@ -270,3 +270,33 @@ def test_a_refused_sweep_plan_reads_the_manifest_and_calibrations_once(tmp_path,
     assert "no closed-loop calibration at alpha=0.37" in capsys.readouterr().err
     assert opened[shipped / "manifest.json"] == 1
     assert opened[shipped / "calibrations.json"] == 1
+
+
+def test_a_plugin_controller_loads_the_zoo_entry_simulate_located(tmp_path, monkeypatch, capsys):
+    """A plugin controller that loads the run's predictor itself (docs/extending.md) located its zoo entry
+    again, after simulate had for its notes and the unknown-name check before it had read both zoos'
+    manifests: one run read manifest.json three times, and a `zoo add --replace` between the reads had the
+    notes describe another model than the plugin planned with. It now loads the entry simulate located."""
+    import json
+
+    from pipelines.cli import main
+    from predictors import zoo
+    from predictors.registry import load_predictor
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    shipped = zoo.checkpoints_dir().resolve()
+    plugin, name, out = (
+        "tests.plugins.toy_controller:LoadingItsPredictor",
+        "social_lstm_eth",
+        tmp_path / "r.json",
+    )
+    opened = count_opens(monkeypatch, ".json", ".pt")
+    run = ["--humans", "2", "--robots", "1", "--episodes", "1", "--no-progress", "--json", str(out)]
+    assert main(["--plugin", plugin, "simulate", "--controller", plugin, "--predictor", name, *run]) == 0
+    read = {path.name: n for path, n in opened.items() if path.parent == shipped}
+    assert read == {"manifest.json": 1, f"{name}.json": 1, f"{name}.pt": 1}
+    recorded = json.loads(out.read_text())["episodes"][0]["predictor_sha256"]
+    assert recorded == zoo.locate(name).entry.sha256
+    opened.clear()
+    load_predictor(name)  # handed for the plugin's build alone: a later load locates the entry again
+    assert opened[shipped / "manifest.json"] == 1

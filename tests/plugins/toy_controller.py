@@ -107,6 +107,23 @@ class Predicting(StraightLine):
         self.predictor = spec.predictor
 
 
+class LoadingItsPredictor(Predicting):
+    """Loads the run's predictor itself, as the guide says (``predictors.registry.load_predictor``), and says
+    which weights it planned with."""
+
+    name = "loading_its_predictor"
+
+    def __init__(self, spec: Any, env_config: EnvConfig | None, *, jit: bool = False):
+        from predictors.registry import load_predictor, loaded_sha256
+
+        super().__init__(spec, env_config, jit=jit)
+        self.model = load_predictor(spec.predictor)
+        self.weights_sha256 = loaded_sha256(self.model)
+
+    def describe(self) -> dict[str, Any]:
+        return {**super().describe(), "predictor_sha256": self.weights_sha256}
+
+
 class PredictingItsOwn(Predicting):
     """Names a predictor of its own, whatever the run asks for: the records and the cell keys disagreed."""
 
