@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from pipelines.commands import examples
 from pipelines.errors import PipelineError
@@ -140,8 +140,8 @@ def _show_recorded(args: argparse.Namespace) -> int:
         provenance,
         recorded_config,
         recorded_runs,
-        zoo_note,
     )
+    from pipelines.experiments.zoo_changes import zoo_note
 
     path, sets = config_arguments(args)
     if path is not None or sets:
@@ -152,9 +152,18 @@ def _show_recorded(args: argparse.Namespace) -> int:
         raise PipelineError(f"--run {args.run}: {sweep_file} records runs 1..{len(runs)}")
     run_line = runs[index - 1]
     config = recorded_config(sweep_file, run_line, index)
-    changed = zoo_note(args.from_sweep)
+    changed = zoo_note(args.from_sweep, _cell_keys(run_line))  # the printed run's cells: what a rerun plans
     if changed:  # on stderr too: a file piped into a rerun shows its comments to no one
         print(f"note: {changed}", file=sys.stderr)
     notes = machine_note(config) + comment(changed)
     print(provenance(sweep_file, run_line, index, len(runs)) + notes + render(config), end="")
     return 0
+
+
+def _cell_keys(run_line: dict[str, Any]) -> set[str] | None:
+    """The keys of the cells a run line planned (None: a line from before they were recorded, whose note
+    takes every record)."""
+    cells = run_line.get("cells")
+    if not isinstance(cells, list):
+        return None
+    return {str(c.get("key")) for c in cells if isinstance(c, dict)}

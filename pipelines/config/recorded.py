@@ -15,7 +15,6 @@ says when the recorded workers exceed it.
 
 from __future__ import annotations
 
-import json
 import math
 import textwrap
 from collections.abc import Sequence
@@ -276,84 +275,6 @@ def machine_note(config: RunConfig) -> str:
 def comment(text: str) -> str:
     """``text`` as TOML comment lines of the printed file's width ("" for none)."""
     return "".join(f"# {line}\n" for line in textwrap.wrap(text, 106))
-
-
-def zoo_note(directory: str | Path) -> str:
-    """A line of plain text ("" for none) when the zoo no longer holds what the sweep's episodes ran with:
-    other weights under a predictor's name (`zoo add --replace`), or a calibration replaced since
-    (`calibrate` again under the same alpha and source) whose margins a rerun plans with differ from those
-    its records planned with. A rerun of the printed file then gives other episodes, and said nothing
-    (README promises "same episodes, metric for metric"); the records name both (predictor_sha256, and each
-    margins' calibration by its creation time and data). A calibration remade with the same margins (only
-    its sample counts moved: constant_velocity's at 89af3ce, under the per-class modes) is said as such."""
-    from pipelines.experiments.log import episode_log
-    from predictors.calibration_store import stored_calibrations
-    from predictors.registry import checkpoint_sha256
-
-    weights: dict[str, Any] = {}  # predictor -> sha256 its episodes ran with
-    # predictor -> whether a rerun plans with other margins than one of its records of a remade block
-    remade: dict[str, bool] = {}
-    planned: dict[str, dict[str, Any] | None] = {}  # _replanned's, by what a rerun plans from
-    try:
-        # (created, data sha256, alpha): a block; one calibrate run makes its blocks of every alpha at once
-        now = {(b.created, b.data_sha256, round(b.alpha, 9)) for _, b in stored_calibrations()}
-        for _, _, record in episode_log(Path(directory)).scan_shown(None, repair=False):
-            name = record.get("predictor")
-            if not isinstance(name, str):
-                continue
-            weights.setdefault(name, record.get("predictor_sha256"))
-            margins = (record.get("config") or {}).get("margins") or {}
-            made = margins.get("calibration")
-            if isinstance(made, dict) and isinstance(margins.get("alpha"), float):
-                block = (str(made.get("created")), str(made.get("data_sha256")), round(margins["alpha"], 9))
-                if block not in now and not remade.get(name):
-                    remade[name] = _replanned(record, planned)
-        changed = [f"{name}'s weights" for name, sha in weights.items() if checkpoint_sha256(name) != sha]
-    except Exception:  # a damaged log or zoo: the rerun's own checks say what is wrong with them
-        return ""
-    changed += sorted(f"{name}'s calibration" for name, other in remade.items() if other)
-    same = sorted(f"{name}'s calibration" for name, other in remade.items() if not other)
-    notes = []
-    if changed:
-        notes.append(
-            f"The zoo no longer holds what this sweep ran with ({', '.join(changed)} changed since), so a "
-            "rerun gives other episodes; `crowdmpc compare OLD NEW` names what differs."
-        )
-    if same:  # the records of a rerun name another block, which compare shows: said, but no other episodes
-        notes.append(
-            f"{', '.join(same)} {'was' if len(same) == 1 else 'were'} remade since with the margins this "
-            "sweep planned with, so a rerun plans with the same margins (its records name the new "
-            "calibration)."
-        )
-    return " ".join(notes)
-
-
-def _replanned(record: dict[str, Any], planned: dict[str, dict[str, Any] | None]) -> bool:
-    """Whether a rerun of ``record``'s episode plans with other margins than it did, by the rule a resume
-    checks them with (``resume_checks.stored_margins``: sample counts aside). ``planned``: what a rerun
-    plans with, kept by its inputs (a sweep's records share a few)."""
-    from pipelines.experiments.resume_checks import margins_planned, stored_margins
-    from pipelines.loop.margins import MarginSpec
-
-    config = record.get("config") or {}
-    margins = config.get("margins") or {}
-    horizon: Any = (config.get("mpc") or {}).get("horizon")
-    sensing = (record.get("sensor_range"), record.get("sensor_tracks") is not False)  # None: every human seen
-    inputs = [
-        record.get("predictor"),
-        margins.get("mode"),
-        margins.get("alpha"),
-        margins.get("source"),
-        horizon,
-    ]
-    key = json.dumps([*inputs, *sensing], sort_keys=True, default=str)
-    if key not in planned:
-        try:
-            spec = MarginSpec(margins["mode"], margins["alpha"], margins["source"]).behind(*sensing)
-            planned[key] = margins_planned(spec, record.get("predictor"), horizon)
-        except Exception:  # no block a rerun plans with (or a damaged record): it does not plan the same
-            planned[key] = None
-    return planned[key] is None or stored_margins(record) != planned[key]
 
 
 def _plain(value: Any) -> str:

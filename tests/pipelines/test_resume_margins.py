@@ -119,3 +119,24 @@ def test_a_calibration_remade_with_the_margins_planned_with_gives_no_note_of_oth
         "note: The zoo no longer holds what this sweep ran with (constant_velocity's calibration changed "
         f"since), {other}"
     )
+
+
+def test_the_note_is_of_the_printed_runs_cells(tmp_path, capsys):
+    """A folder holds the cells of every run swept into it: `config show --from-sweep` noted every record's
+    remade block, so a run with margins none, printed by default as the folder's last, was told "a rerun
+    gives other episodes" because an earlier run's conformal block was remade. Each run's note is now of the
+    records of the cells its run line planned."""
+    out = tmp_path / "sweep"
+    _calibrate_classes(created="2026-01-01T00:00:00+00:00")
+    plain_argv = [("conformal" if a == "conformal-shortfall" else a) for a in SHORTFALL_ARGV]
+    none_argv = [("none" if a == "conformal-shortfall" else a) for a in SHORTFALL_ARGV]
+    assert main([*plain_argv, "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    assert main([*none_argv, "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    _calibrate_classes(standing_error=0.0, created="2026-01-02T00:00:00+00:00", added=3)  # plain ones moved
+    capsys.readouterr()
+    for run in ([], ["--run", "2"]):
+        assert main(["config", "show", "--from-sweep", str(out), *run]) == 0
+        printed, err = capsys.readouterr()
+        assert (err, "no longer holds" in printed) == ("", False), run
+    assert main(["config", "show", "--from-sweep", str(out), "--run", "1"]) == 0
+    assert "so a rerun gives other episodes" in capsys.readouterr().err
