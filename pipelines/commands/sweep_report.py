@@ -15,7 +15,7 @@ import json
 import sys
 import zlib
 from collections import Counter
-from collections.abc import Collection, Iterator
+from collections.abc import Callable, Collection, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -92,8 +92,12 @@ def report(
     ``log``: what the sweep read and appended of the log (``LogRead.of_plan`` fed by ``run_sweep``), else
     the log is read here."""
     from pipelines.experiments.log import EPISODES_FILE
+    from pipelines.experiments.zoo_changes import ZooChanges
 
-    log = read_log(config, cells, tasks) if log is None else log
+    # a report of an old folder says when a rerun would plan otherwise, as `config show --from-sweep` does,
+    # from the records it reads anyway (the report's files are of the records, and stay as they were)
+    zoo = ZooChanges() if report_only and log is None else None
+    log = read_log(config, cells, tasks, None if zoo is None else zoo.add) if log is None else log
     if report_only and log.held and not log.planned:
         out = config.out
         humans = ",".join(map(str, config.humans or config.experiment.humans))
@@ -108,6 +112,9 @@ def report(
     if report_only:
         _note_unrun_cells(cells, log.cells)
     _write(config, cells, tasks, log)
+    changed = "" if zoo is None else zoo.note()
+    if changed:
+        print(f"note: {changed}", file=sys.stderr)
 
 
 def _note_unrun_cells(cells: tuple[Cell, ...], recorded: set[str]) -> None:
@@ -169,13 +176,21 @@ class LogRead:
             self.runs.add(run_number(record))
 
 
-def read_log(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask]) -> LogRead:
-    """--out's episodes.jsonl as the report reads it, checked as a sweep loads it."""
+def read_log(
+    config: SweepConfig,
+    cells: tuple[Cell, ...],
+    tasks: list[EpisodeTask],
+    also: Callable[[dict[str, Any]], None] | None = None,
+) -> LogRead:
+    """--out's episodes.jsonl as the report reads it, checked as a sweep loads it; ``also``: given each
+    record of the plan too (those the report is of)."""
     from pipelines.experiments.log import episode_log
 
     log = LogRead.of_plan(cells, tasks)
     for offset, line, record in episode_log(config.out).scan_shown(config.progress, repair=False):
         log.add(offset, line, record)
+        if also is not None and record["key"] in log.planned_keys:
+            also(record)
     return log
 
 

@@ -140,3 +140,36 @@ def test_the_note_is_of_the_printed_runs_cells(tmp_path, capsys):
         assert (err, "no longer holds" in printed) == ("", False), run
     assert main(["config", "show", "--from-sweep", str(out), "--run", "1"]) == 0
     assert "so a rerun gives other episodes" in capsys.readouterr().err
+
+
+def test_a_report_of_a_folder_whose_block_was_remade_says_so_and_writes_the_same_files(
+    tmp_path, capsys, monkeypatch
+):
+    """`sweep --report-only` said nothing of a calibration remade since the folder was swept (constant
+    velocity's conformal:0.1 before 89af3ce), where `config show --from-sweep` notes it: the report now
+    says it on stderr, from the records it reads anyway (the log read once), its files as they were."""
+    from pipelines.experiments.log import EpisodeLog
+
+    out = tmp_path / "cp"
+    _calibrate_classes(created="2026-01-01T00:00:00+00:00")
+    plain_argv = [("conformal" if a == "conformal-shortfall" else a) for a in SHORTFALL_ARGV]
+    assert main([*plain_argv, "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    report = ["sweep", "--report-only", "--no-progress", "--out", str(out)]
+    capsys.readouterr()
+    assert main(report) == 0
+    printed, err = capsys.readouterr()
+    assert "note: The zoo" not in err
+    files = {name: (out / name).read_bytes() for name in ("table.md", "cells.csv", "episodes.csv")}
+    _calibrate_classes(standing_error=0.0, created="2026-01-02T00:00:00+00:00", added=3)  # plain ones moved
+    scans = []
+    scan = EpisodeLog.scan
+    monkeypatch.setattr(EpisodeLog, "scan", lambda self, *a, **k: scans.append(1) or scan(self, *a, **k))
+    assert main(report) == 0
+    again, err = capsys.readouterr()
+    assert again == printed and {name: (out / name).read_bytes() for name in files} == files
+    notes = [line for line in err.splitlines() if "no longer holds" in line]
+    assert notes == [
+        "note: The zoo no longer holds what this sweep ran with (constant_velocity's calibration changed "
+        "since), so a rerun gives other episodes; `crowdmpc compare OLD NEW` names what differs."
+    ]
+    assert len(scans) == 1
