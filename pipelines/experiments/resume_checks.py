@@ -60,8 +60,8 @@ class ResumeChecks:
         self.done = bytearray(len(tasks))  # 1 where the log holds the planned episode
         # (predictor, its sha256) as JSON -> (first plan index, predictor, sha256)
         self._predictors: dict[str, tuple[int, Any, Any]] = {}
-        # (cell key, its margins as JSON) -> (first plan index, margins)
-        self._margins: dict[tuple[str, str], tuple[int, dict[str, Any]]] = {}
+        # (cell key, its margins as JSON) -> (first plan index, margins, the calibration its record names)
+        self._margins: dict[tuple[str, str], tuple[int, dict[str, Any], Any]] = {}
         # (replayed crowd, its file's sha256) -> first plan index
         self._crowds: dict[tuple[str, str], int] = {}
         self.outside = 0  # records of episodes this run does not plan (another run's options)
@@ -94,7 +94,8 @@ class ResumeChecks:
         stored = stored_margins(record)
         if stored is not None:
             key = (self.tasks[i].cell.key, json.dumps(stored, sort_keys=True))
-            _keep_first(self._margins, key, (i, stored))
+            made = ((record.get("config") or {}).get("margins") or {}).get("calibration")
+            _keep_first(self._margins, key, (i, stored, made))
 
     def recorded(self, i: int) -> bool:
         return bool(self.done[i])
@@ -143,15 +144,14 @@ class ResumeChecks:
         nothing."""
         current: dict[str, dict[str, Any]] = {}  # cell key -> its margins now
         log = self.out / EPISODES_FILE
-        for i, stored in sorted(self._margins.values(), key=lambda first: first[0]):
+        for i, stored, made in sorted(self._margins.values(), key=lambda first: first[0]):
             key = self.tasks[i].cell.key
             if key not in current:
                 current[key] = planned_margins(self.tasks[i].cell)
             if stored != current[key]:
                 raise PipelineError(
                     f"{log} holds episodes of {key} planned with {_margins_change(stored, current[key])}: "
-                    "they changed since the records were made (recalibrated?); "
-                    f"{self._remedy('the new margins')}"
+                    f"{_why_changed(self.tasks[i].cell, made)}; {self._remedy('the new margins')}"
                 )
 
     def _check_crowds(self) -> None:
@@ -175,7 +175,33 @@ class ResumeChecks:
         would take, no taking (they are not the episodes the cells plan now)."""
         if self.reused:
             return "they are not episodes of this plan now: run the sweep without --reuse"
-        return f"use another --out for {what}"
+        # a report runs none of these checks: the folder still reports what it holds, which went unsaid
+        return (
+            f"use another --out for {what}, or `crowdmpc sweep --report-only --out {self.out}` to report the "
+            "episodes it holds"
+        )
+
+
+def _why_changed(cell: Cell, made: Any) -> str:
+    """Why ``cell``'s margins moved since its record of calibration ``made`` (None: a record that names none):
+    the block it planned with was made again, both named (constant_velocity's closed-loop blocks at 89af3ce,
+    m_1 moved by up to 1.5e-3 m), else a guess; a refusal had said "(recalibrated?)" of them too."""
+    from pipelines.loop.margins import calibration_text
+    from predictors.registry import checkpoint_sha256
+
+    spec = cell.spec.behind(cell.world.sensor_range, cell.world.sensor_tracks)  # as planned_margins'
+    try:
+        now = spec.margins.calibration(spec.predictor_name, checkpoint_sha256(spec.predictor_name))
+    except Exception:  # no block now (planned_margins found one a moment ago): said as before
+        now = None
+    fields = ("created", "data_sha256")
+    if not isinstance(made, dict) or now is None or all(made.get(f) == now[f] for f in fields):
+        return "they changed since the records were made (recalibrated?)"
+    margins = spec.margins
+    return (
+        f"{spec.predictor_name}'s {margins.source} calibration at alpha {margins.alpha:g} was made again "
+        f"after the records (records: {calibration_text(made)}, now: {calibration_text(now)})"
+    )
 
 
 def _margins_change(was: dict[str, Any], now: dict[str, Any]) -> str:

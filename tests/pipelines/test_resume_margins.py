@@ -173,3 +173,25 @@ def test_a_report_of_a_folder_whose_block_was_remade_says_so_and_writes_the_same
         "since), so a rerun gives other episodes; `crowdmpc compare OLD NEW` names what differs."
     ]
     assert len(scans) == 1
+
+
+def test_a_folder_of_a_remade_plain_block_is_refused_naming_both_blocks_and_the_report(tmp_path, capsys):
+    """A plain conformal folder of constant_velocity made before 89af3ce (its m_1 moved) is refused on a
+    resume: the refusal guessed "(recalibrated?)" and said only "use another --out", where the folder's
+    report still reads it. It names the block the records planned with and the one the zoo holds, and
+    `sweep --report-only` of the folder, which then reports it."""
+    out = tmp_path / "cp"
+    _calibrate_classes(created="2026-01-01T00:00:00+00:00")
+    plain_argv = [("conformal" if a == "conformal-shortfall" else a) for a in SHORTFALL_ARGV]
+    assert main([*plain_argv, "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    _calibrate_classes(standing_error=0.0, created="2026-01-02T00:00:00+00:00", added=3)  # plain ones moved
+    capsys.readouterr()
+    assert main([*plain_argv, "--episodes-per-cell", "2", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.rstrip().endswith(
+        ": constant_velocity's closed-loop calibration at alpha 0.1 was made again after the records "
+        "(records: your calibration of 2026-01-01 00:00 UTC, now: your calibration of 2026-01-02 00:00 UTC); "
+        f"use another --out for the new margins, or `crowdmpc sweep --report-only --out {out}` to report the "
+        "episodes it holds"
+    ), err
+    assert main(["sweep", "--report-only", "--no-progress", "--out", str(out)]) == 0

@@ -633,11 +633,11 @@ MARGINS_ARGV = ["sweep", "--experiment", "controllers", "--controllers", "cmpc",
                 "inline", "--no-progress", "--jit", "off"]  # fmt: skip
 
 
-def _calibrate(scale: float) -> None:
-    """constant_velocity's closed-loop block at alpha 0.1: margins 0.18 k * scale at step k."""
-    save_calibration(
-        constant_velocity_block(np.outer(np.arange(1, 20) / 100.0 * scale, [1.0, 2.0, 3.0, 4.0]))
-    )
+def _calibrate(scale: float, created: str = "2026-01-01T00:00:00+00:00") -> None:
+    """constant_velocity's closed-loop block at alpha 0.1: margins 0.18 k * scale at step k, made at
+    ``created`` (a refusal names it)."""
+    block = constant_velocity_block(np.outer(np.arange(1, 20) / 100.0 * scale, [1.0, 2.0, 3.0, 4.0]))
+    save_calibration(dataclasses.replace(block, created=created))
 
 
 def test_a_cell_is_not_extended_after_a_recalibration(tmp_path, capsys):
@@ -645,15 +645,18 @@ def test_a_cell_is_not_extended_after_a_recalibration(tmp_path, capsys):
     _calibrate(1.0)
     assert main([*MARGINS_ARGV, "--episodes-per-cell", "2", "--out", str(out)]) == 0
     records = (out / EPISODES_FILE).read_bytes()
-    _calibrate(2.0)  # the same predictor, source and alpha: the same cell key
+    _calibrate(2.0, "2026-01-02T00:00:00+00:00")  # the same predictor, source and alpha: the same cell key
     capsys.readouterr()
     assert main([*MARGINS_ARGV, "--episodes-per-cell", "4", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     cell = "cmpc-constant_velocity-F-ibr-m=cp0.1-paper-visible-h1-r1"
     assert err == [
         f"crowdmpc sweep: error: {out / EPISODES_FILE} holds episodes of {cell} planned with margins "
-        "[0.18, 0.36, 0.54, 0.72] m, but the cell's margins are now [0.36, 0.72, 1.08, 1.44] m: they changed "
-        "since the records were made (recalibrated?); use another --out for the new margins"
+        "[0.18, 0.36, 0.54, 0.72] m, but the cell's margins are now [0.36, 0.72, 1.08, 1.44] m: "
+        "constant_velocity's closed-loop calibration at alpha 0.1 was made again after the records "
+        "(records: your calibration of 2026-01-01 00:00 UTC, now: your calibration of 2026-01-02 00:00 UTC); "
+        f"use another --out for the new margins, or `crowdmpc sweep --report-only --out {out}` to report the "
+        "episodes it holds"
     ]
     assert (out / EPISODES_FILE).read_bytes() == records
     assert len(json.loads((out / SWEEP_FILE).read_text())["runs"]) == 1  # a refused run leaves no line

@@ -182,7 +182,10 @@ def test_outs_own_records_are_checked_before_anything_is_taken(table2, tmp_path,
     (out / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     before = {name: (out / name).read_bytes() for name in ("episodes.jsonl", "sweep.json")}
     code, _, err = _table3(capsys, out, "--reuse", str(table2))
-    assert code == 2 and one_line(err).endswith("use another --out for the new weights")
+    assert code == 2 and one_line(err).endswith(
+        f"use another --out for the new weights, or `crowdmpc sweep --report-only --out {out}` to report the "
+        "episodes it holds"
+    )
     assert {name: (out / name).read_bytes() for name in before} == before  # nothing taken
 
 
