@@ -38,6 +38,7 @@ from crowdsim.replay import CROWDS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
+    check_distinct,
     count_in,
     episode_bar,
     episode_count,
@@ -153,6 +154,9 @@ def main() -> None:
         parser.error(f"--sensor-range must be a finite number of metres > 0, got {args.sensor_range}")
     for text in (*args.margins, args.plan_with):
         parse_margins(text)  # a typo is one line now, not after the episodes
+    # the report is keyed by both: a repeat ran (or scored) twice and was printed and written once
+    check_distinct(parser, "--crowds", args.crowds)
+    check_distinct(parser, "--margins", args.margins)
     with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
         _measure(args)
 

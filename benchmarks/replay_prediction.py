@@ -31,7 +31,7 @@ from crowdsim.replay import REPLAYED, Recording, track_lengths
 from crowdsim.world import HORIZON, OBS_LEN
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import count_in, predictor_name, run_main  # noqa: E402
+from bench_cli import check_distinct, count_in, predictor_name, run_main  # noqa: E402
 
 # Rows tracked: a whole TrajNet++ history, a track come into view lately (part filled in), one just come.
 GROUPS = {
@@ -125,6 +125,7 @@ def main() -> None:
     parser.add_argument("--every", type=count_in("every", 1), default=1, help="evaluate every k-th row")
     parser.add_argument("--by", choices=("track", "speed"), default="track", help="group by (docstring)")
     args = parser.parse_args()
+    check_distinct(parser, "--predictors", args.predictors)  # a repeat scored and printed its row twice
     from pipelines.loop.replay_data import recording
     from predictors.registry import load_predictor
 

@@ -9,6 +9,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from pipelines.loop.margins import parse_margins
 from predictors.registry import checkpoint_sha256
@@ -103,3 +104,24 @@ def test_a_crowd_that_never_came_near_has_no_coverage_and_is_printed_so(capsys):
     report = {"predictor": "constant_velocity", "plan_with": "none", "crowds": {"eth": eth}}
     replay_coverage.print_report(report, 4)
     assert capsys.readouterr().out.splitlines()[-1].split() == ["conformal:0.1", "-", "-", "-", "-"]
+
+
+def test_a_crowd_or_margins_named_twice_is_refused_before_any_episode(monkeypatch, capsys):
+    """--crowds orca orca ran the crowd's episodes twice (the same seeds) and the report, keyed by crowd,
+    printed and wrote one; --margins scored one margin twice and kept one."""
+
+    def no_episodes(*args, **kwargs):
+        raise AssertionError("an episode ran; the command line should have been refused")
+
+    monkeypatch.setattr(replay_coverage, "scores", no_episodes)
+    for argv, repeated in (
+        (["--crowds", "orca", "hotel_test", "orca"], "--crowds names orca more than once"),
+        (["--margins", "conformal:0.1", "conformal:0.1"], "--margins names conformal:0.1 more than once"),
+    ):
+        monkeypatch.setattr(sys, "argv", ["replay_coverage.py", *argv, "--episodes", "1"])
+        with pytest.raises(SystemExit) as exit_:
+            replay_coverage.main()
+        assert exit_.value.code == 2
+        out, err = capsys.readouterr()
+        assert out == ""
+        assert err.splitlines()[-1] == f"replay_coverage.py: error: {repeated}"

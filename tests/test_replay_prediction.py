@@ -102,3 +102,24 @@ def test_the_orca_oracle_is_refused_in_one_line_before_the_recording_is_read(mon
         "replay_prediction.py: error: argument --predictors: orca_oracle predicts the simulator's humans "
         "from its ORCA state, not a recording's people: name a predictor that reads positions"
     )
+
+
+def test_a_predictor_named_twice_is_refused_before_the_recording_is_read(monkeypatch, capsys):
+    """--predictors constant_velocity constant_velocity scored the recording twice and printed the row twice
+    (the other benchmarks refuse a repeated row when parsed, bench_cli.check_distinct)."""
+    argv = [
+        "replay_prediction.py",
+        "--predictors",
+        "constant_velocity",
+        "social_lstm_eth",
+        "constant_velocity",
+    ]
+    monkeypatch.setattr(sys, "argv", argv)
+    with pytest.raises(SystemExit) as exit_:
+        replay_prediction.main()
+    assert exit_.value.code == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err.splitlines()[-1] == (
+        "replay_prediction.py: error: --predictors names constant_velocity more than once"
+    )
