@@ -9,7 +9,7 @@ import json
 from typing import Any
 
 from pipelines.errors import PipelineError
-from predictors.errors import PredictorError
+from predictors.errors import DuplicateKey, PredictorError, unique_keys
 
 # --net-config is a JSON object of a few hyper-parameters; a longer text is no config anyone types.
 MAX_NET_CONFIG_CHARS = 65_536
@@ -158,8 +158,10 @@ def parse_net_config(text: str) -> dict[str, Any]:
         raise PipelineError(
             f"--net-config: {len(text)} characters, more than the {MAX_NET_CONFIG_CHARS} allowed"
         )
-    try:
-        values = json.loads(text)
+    try:  # a key typed twice: json kept the last without a word (the 64 of hidden_dim 32 then 64 trained)
+        values = json.loads(text, object_pairs_hook=unique_keys)
+    except DuplicateKey as exc:
+        raise PipelineError(f"--net-config: {exc}; give each key once (json would keep the last)") from None
     except ValueError as exc:  # JSONDecodeError, or an integer literal of more than 4300 digits
         raise PipelineError(f"--net-config: not valid JSON ({exc})") from None
     except RecursionError:

@@ -393,6 +393,10 @@ def test_predictor_names_are_checked_by_the_parser(tmp_path, capsys, value):
         ),
         (["--model", "social_lstm", "--net-config", "[1]"], "--net-config must be a JSON object"),
         (["--model", "social_lstm", "--net-config", "{"], "--net-config: not valid JSON"),
+        (  # json kept the last of a key typed twice: a 64-unit net trained without a word
+            ["--model", "social_lstm", "--net-config", '{"hidden_dim": 32, "hidden_dim": 64}'],
+            "--net-config: the key 'hidden_dim' appears twice in one object; give each key once",
+        ),
         (["--model", "social_lstm", "--net-config", "[" * 100_000], "--net-config: 100000 characters"),
         (
             ["--model", "social_gru", "--net-config", '{"bogus": 1}'],
