@@ -99,6 +99,10 @@ class RunCheckpoint(ModelCheckpoint):
 CHECKPOINT_TEMPORARY: Final[re.Pattern[str]] = re.compile(r"\..+\.ckpt\.[a-z0-9_]{8}\.part")
 
 
+# what WholeCSVLogger reads of Lightning's _ExperimentWriter (not its public API)
+_WRITER_FIELDS: Final[tuple[str, ...]] = ("metrics", "metrics_keys", "metrics_file_path")
+
+
 class WholeCSVLogger(CSVLogger):
     """Lightning's CSVLogger, whose metrics.csv is rewritten whole or not at all. Lightning writes the file's
     header from the columns logged so far and, when a new one comes, truncates the file and writes it again
@@ -108,10 +112,13 @@ class WholeCSVLogger(CSVLogger):
     the OOM killer or a full disk in a rewrite lost every row logged before (measured: vanilla_lstm, 2
     epochs of at most 130 batches: three rewrites, the last of 20 rows). The new header and the rows now go
     to a new file that replaces the old in one rename, and Lightning, finding no new column left, appends
-    as ever; the file's bytes are Lightning's."""
+    as ever; the file's bytes are Lightning's. It reads Lightning's writer's own fields (2.4 to 2.6 name them
+    alike); a release without them gets Lightning's save as it is, the rewrite in place, not a failed run."""
 
     def save(self) -> None:
         writer = self.experiment
+        if not all(hasattr(writer, field) for field in _WRITER_FIELDS):
+            return super().save()
         new = set().union(*writer.metrics) - set(writer.metrics_keys)
         path = Path(writer.metrics_file_path)
         if new and path.is_file():

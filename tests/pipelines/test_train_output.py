@@ -69,3 +69,18 @@ def test_metrics_csv_survives_a_failure_while_a_new_column_rewrites_it(tmp_path,
     (kept,) = (tmp_path / "full" / "csv").glob("version_*/metrics.csv")
     # the rows of the first epoch, lr-Adam's at step 0 and the validation's at step 1, are still there
     assert [r.get("step") for r in csv.DictReader(kept.open(newline=""))][:2] == ["0", "1"], kept.read_text()
+
+
+def test_a_lightning_writer_without_the_fields_read_gets_lightnings_own_save(tmp_path, monkeypatch):
+    """WholeCSVLogger reads fields of Lightning's private _ExperimentWriter; a release that renamed them would
+    have failed every training at its first save. Such a writer now gets Lightning's save as it is."""
+    from lightning.pytorch.loggers import CSVLogger
+
+    from pipelines.commands.train_checkpoint import WholeCSVLogger
+
+    saved = []
+    monkeypatch.setattr(CSVLogger, "save", lambda self: saved.append(self))
+    monkeypatch.setattr(WholeCSVLogger, "experiment", property(lambda self: object()))  # no fields at all
+    logger = WholeCSVLogger(str(tmp_path))
+    logger.save()
+    assert saved == [logger]
