@@ -48,7 +48,7 @@ if TYPE_CHECKING:
     from types import EllipsisType
 
     from crowdsim.env import Observation
-    from pipelines.loop.margins_read import Planned
+    from pipelines.loop.margins_read import Planned, Refused
     from predictors.base import Predictor
     from predictors.zoo import Located as ZooLocated
 
@@ -104,7 +104,8 @@ class ControllerReads:
     reads had the notes describe other weights or another block than the controller planned with. A
     plugin loads its own predictor, of the entry located already (``located``)."""
 
-    predictor: Predictor | None = None  # the one spec.predictor names; None: loaded as the MPC is built
+    # the one spec.predictor names; None: loaded as the MPC is built; Refused: its load refused, raised there
+    predictor: Predictor | Refused | None = None
     calibration: Planned | EllipsisType = ...  # margins_read.look_up of its weights; ...: read then
     # the zoo entry spec.predictor names, as the command located it (None: none; ...: not located), which a
     # plugin that loads the run's predictor itself loads (predictors.registry.handing)

@@ -64,6 +64,24 @@ def look_up(
     return at
 
 
+def load_refused(
+    margins: MarginSpec, predictor: str, sha256: str | None, kind: ModelKind, error: Exception
+) -> Refused:
+    """A predictor whose load refused (``error``, raised where the controller loads it, after the notes):
+    the notes describe the block stored for its zoo entry's weights (``sha256``), unchecked against a
+    horizon, None where none is found, as each note looked it up. Looked up by each note and loaded again
+    by the controller, a corrupt social_lstm_eth.pt had `simulate --margins conformal:0.1` read manifest.json
+    7 times, calibrations.json 5 times and the weights twice before its one line."""
+    from pipelines.loop.margins import CALIBRATED_MODES
+
+    if margins.mode not in CALIBRATED_MODES:
+        return Refused(error)
+    try:
+        return Refused(error, margins.stored(predictor, sha256, kind))
+    except (PipelineError, PredictorError):  # the notes say nothing of a block they cannot find
+        return Refused(error)
+
+
 def as_planned(
     margins: MarginSpec, read: Planned | EllipsisType, predictor: str, horizon: int, sha256: str | None
 ) -> Located | None:

@@ -81,11 +81,12 @@ class MPCController(SolversHeld):
         *,
         env_config: EnvConfig | None = None,
         jit: bool = False,
-        predictor: Predictor | None = None,
+        predictor: Predictor | Refused | None = None,
         calibration: Located | None | Refused | EllipsisType = ...,
     ):
         """``env_config``: the simulator's settings, for a predictor that observes it (the ORCA oracle);
-        ``predictor``, ``calibration``: spec's predictor and block (``look_up``'s), read already."""
+        ``predictor``, ``calibration``: spec's predictor and block (``look_up``'s), read already; a
+        ``Refused`` predictor: the refusal of the command's load of it, raised here where it loads it."""
         from crowdsim.env_config import EnvConfig
 
         if distributed and spec.coupling == "nlp":  # refused before a predictor is loaded for it
@@ -94,6 +95,8 @@ class MPCController(SolversHeld):
         self.name = "dmpc" if distributed else "cmpc"
         self.distributed = distributed
         self.env_config = env_config if env_config is not None else EnvConfig()
+        if isinstance(predictor, Refused):  # loaded once by the command: its refusal at this load's turn
+            raise predictor.error
         self.model: Predictor = predictor if predictor is not None else load_predictor(spec.predictor)
         self.predictor: str | None = self.model.name
         self._observer = self.model if isinstance(self.model, ObservingPredictor) else None

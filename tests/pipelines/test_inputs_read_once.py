@@ -300,3 +300,42 @@ def test_a_plugin_controller_loads_the_zoo_entry_simulate_located(tmp_path, monk
     opened.clear()
     load_predictor(name)  # handed for the plugin's build alone: a later load locates the entry again
     assert opened[shipped / "manifest.json"] == 1
+
+
+def corrupt_shipped_copy(tmp_path, monkeypatch, name: str = "social_lstm_eth") -> Path:
+    """A copy of the shipped zoo, as $CROWDMPC_CHECKPOINTS, whose ``name``.pt has a byte flipped (a model
+    that does not load: its sha256 is not the manifest's); its folder, resolved."""
+    import shutil
+
+    from predictors import zoo
+
+    root = tmp_path / "checkpoints"
+    shutil.copytree(zoo.shipped_checkpoints_dir(), root)
+    weights = root / f"{name}.pt"
+    data = bytearray(weights.read_bytes())
+    data[-10] ^= 0x01
+    weights.write_bytes(bytes(data))
+    monkeypatch.setenv(zoo.CHECKPOINTS_ENV, str(root))
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    return root.resolve()
+
+
+def test_a_simulate_whose_predictor_does_not_load_reads_each_input_once(tmp_path, monkeypatch, capsys):
+    """A load that refused was dropped: each calibration note looked the block up itself (the manifest for
+    the weights' sha256, then calibrations.json) and the controller loaded the predictor again, so a corrupt
+    social_lstm_eth.pt had `simulate --margins conformal:0.1` read the manifest 7 times, calibrations.json 5
+    times and the weights and config twice before its line. The refusal is kept and raised by the
+    controller, after the notes, as before."""
+    from pipelines.cli import main
+
+    name = "social_lstm_eth"
+    shipped = corrupt_shipped_copy(tmp_path, monkeypatch, name)
+    opened = count_opens(monkeypatch, ".json", ".pt")
+    run = ["--humans", "2", "--robots", "1", "--episodes", "1", "--no-progress", "--margins", "conformal:0.1"]
+    assert main(["simulate", "--controller", "cmpc", "--predictor", name, *run]) == 2
+    note, error = capsys.readouterr().err.splitlines()
+    assert note.startswith(f"note: the closed-loop margins of {name!r} at alpha=0.1 were calibrated with 3")
+    assert error.startswith(f"crowdmpc simulate: error: checkpoint {shipped / name}.pt has sha256 ")
+    assert "but the manifest expects" in error
+    read = {path.name: n for path, n in opened.items() if path.parent == shipped}
+    assert read == {"manifest.json": 1, f"{name}.json": 1, f"{name}.pt": 1, "calibrations.json": 1}
