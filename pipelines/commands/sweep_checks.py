@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import sys
 from functools import partial
-from typing import TYPE_CHECKING, Any, Final, NamedTuple
+from typing import TYPE_CHECKING, Any, Final
 
 from mpc.config import MPC_BOUNDS, MPC_LEAST
 from pipelines.commands.calibration_notes import (
@@ -18,6 +18,7 @@ from pipelines.commands.calibration_notes import (
     sensor_margins_note,
 )
 from pipelines.commands.simulate_checks import horizon_note, size_note, tolerance_note, zoo_entry, zoo_notes
+from pipelines.commands.sweep_predictors import PlanModels, check_predictors, read_predictors
 from pipelines.commands.team_notes import flock_note, goal_room_note, separate_goals_note
 from pipelines.config.schema import MPC_FROM_WORLD
 from pipelines.errors import PipelineError
@@ -35,76 +36,15 @@ if TYPE_CHECKING:
     from predictors.manifest import ZooEntry
 
 
-class PlanModels(NamedTuple):
-    """What ``check_predictors`` read of the zoos, for the other checks and the notes."""
-
-    loaded: dict[str, Predictor]  # the zoo models the plan's methods plan with, by name
-    entries: dict[str, ZooEntry]  # the zoo entry each of them loads (a registered predictor has none)
-    # the calibration block each method plans with, by label, or its refusal (``planned_margins``'), None:
-    # not looked up yet
-    blocks: dict[str, Planned] | None = None
-
-
-def check_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None = None) -> PlanModels:
-    """Fail before starting workers, not once per episode in errors.jsonl: every predictor is registered or
-    in a zoo, a zoo model's kind is registered (a plugin's, with --plugin, which the workers inherit), and it
-    loads as simulate loads it (its files' sha256 as its manifest records them, its net's contract), each
-    refusal simulate's one line. ``chosen_by``: a predictor's name -> where the run chose it ("run.toml:
-    controller.predictor", "--predictors"), which its refusal names first. Returns the zoo models loaded,
-    by name, for the couplings' and margins' checks (``check_plan``), with their entries, for the notes
-    (``method_notes``): each read again, a `zoo add --replace` between the reads had one check pass weights
-    the next did not see."""
-    from predictors import zoo
-    from predictors.errors import PredictorError
-    from predictors.models import model_kind
-    from predictors.registry import PREDICTORS
-
-    chosen_by = chosen_by or {}
-    # only the predictors some method plans with: an orca or straight column loads none, and registered ones
-    # need no zoo (a damaged user manifest stopped a sweep of constant velocity and ORCA)
-    wanted = {name for _, spec in experiment.methods if (name := spec.predictor_name) is not None}
-    if wanted <= set(PREDICTORS):
-        return PlanModels({}, {})
-    # both manifests read once: the entry each name loads (shipped first)
-    entries: dict[str, zoo.Located] = {}
-    for located in zoo.zoo_entries():
-        entries.setdefault(located.entry.name, located)
-    known = set(PREDICTORS) | set(entries)
-    missing = sorted(wanted - known)
-    if missing:
-        where = next((chosen_by[name] for name in missing if name in chosen_by), None)
-        option = "--predictors" if experiment.predictor_list else "--predictor"
-        hint = f"check the names {option} gives, or " if where is None else ""
-        raise PipelineError(
-            f"{'' if where is None else f'{where}: '}experiment {experiment.name!r} needs predictors "
-            f"{missing} that are not available; available: {sorted(known)} ({hint}train or fetch the zoo "
-            "models)"
-        )
-    loaded: dict[str, Predictor] = {}
-    for name in sorted(wanted - set(PREDICTORS)):
-        located = entries[name]
-        where = f"{chosen_by[name]}: " if name in chosen_by else ""
-        try:
-            model_kind(located.entry.model)
-        except PredictorError as exc:
-            raise PipelineError(f"{where}predictor {name!r} of the {located.source} zoo: {exc}") from None
-        try:
-            loaded[name] = zoo.load_located(located)  # what every worker would do first, and fail at
-        except (PipelineError, PredictorError) as exc:
-            if not where:
-                raise
-            raise PipelineError(f"{where}{exc}") from None
-    return PlanModels(loaded, {name: entries[name].entry for name in loaded})
-
-
 def noted_models(experiment: Experiment, cfg: RunConfig | None, cells: Iterable[Cell]) -> PlanModels:
     """The installed controllers' and ``check_predictors``' checks of the plan, a killed calibrate's blocks
     taken back and ``check_margins``, then the ``method_notes`` of its ``cells`` printed, of the entries and
     blocks those checks located: the manifest and the calibrations read once for both, where read apart
     (the manifest and the calibrations once a calibration note) a `zoo add --replace` or a calibrate run
     between the reads had the notes describe other models or blocks than were checked. A refusal comes
-    after the notes, as it did when the whole ``check_plan`` followed them (the notes then look the entries
-    and blocks up themselves); the margins' is ``check_plan``'s, in its turn after the couplings'."""
+    after the notes, as it did when the whole ``check_plan`` followed them: a model that does not load
+    (``read_predictors``' ``refused``) with the notes of the entries and blocks located for it, others with
+    notes that look them up themselves; the margins' is ``check_plan``'s, in its turn after the couplings'."""
     from pipelines.commands.calibrate_store import take_back_before_planning
     from pipelines.loop.spec import controller_names
     from predictors.errors import PredictorError
@@ -112,8 +52,9 @@ def noted_models(experiment: Experiment, cfg: RunConfig | None, cells: Iterable[
     cells = list(cells)
     try:
         controller_names()
-        models = check_predictors(experiment, {} if cfg is None else _predictors_chosen(cfg))
-        take_back_before_planning(cell.spec.margins for cell in cells)  # before any block is read
+        models = read_predictors(experiment, {} if cfg is None else _predictors_chosen(cfg))
+        if models.refused is None:  # a model that does not load: refused after the notes, as before
+            take_back_before_planning(cell.spec.margins for cell in cells)  # before any block is read
     except (PipelineError, PredictorError):
         for note in method_notes(cells):
             print(note, file=sys.stderr)
@@ -124,6 +65,8 @@ def noted_models(experiment: Experiment, cfg: RunConfig | None, cells: Iterable[
         pass
     for note in method_notes(cells, models.entries, models.blocks):
         print(note, file=sys.stderr)
+    if models.refused is not None:
+        raise models.refused
     return models
 
 
@@ -298,11 +241,13 @@ def planned_margins(
     for label, spec in experiment.methods:
         name = spec.predictor_name
         predictor = loaded.get(name) if name is not None else None
-        sha256 = loaded_sha256(predictor) if predictor is not None else checkpoint_sha256(name)
+        entry = None if entries is None else entries.get(name or "")
+        # a model that did not load (read_predictors): its entry's, as the notes read it
+        unloaded = checkpoint_sha256(name) if entry is None else entry.sha256
+        sha256 = loaded_sha256(predictor) if predictor is not None else unloaded
         horizon = mpc_config(spec).horizon
         world = experiment.method_worlds.get(label, experiment.world)
         margins = spec.margins.behind(world.sensor_range, world.sensor_tracks)
-        entry = None if entries is None else entries.get(name or "")
         kind = ... if entries is None else None if entry is None else entry.model
         key = (margins, name, horizon, sha256)
         if key not in blocks:  # the calibrations read once, as the controller does

@@ -339,3 +339,35 @@ def test_a_simulate_whose_predictor_does_not_load_reads_each_input_once(tmp_path
     assert "but the manifest expects" in error
     read = {path.name: n for path, n in opened.items() if path.parent == shipped}
     assert read == {"manifest.json": 1, f"{name}.json": 1, f"{name}.pt": 1, "calibrations.json": 1}
+
+
+def test_a_sweep_whose_predictor_does_not_load_reads_each_input_once(tmp_path, monkeypatch, capsys):
+    """check_predictors' refusal of a model that does not load left the notes printed before it to locate
+    the entries again and look each method's block up once a note: a corrupt social_lstm_eth.pt had Table
+    II's dry run with --margins conformal:0.1 read the manifest 12 times and calibrations.json 10 times. The
+    notes now describe what the check located, then its refusal follows, as before."""
+    from pipelines.cli import main
+
+    name = "social_lstm_eth"
+    shipped = corrupt_shipped_copy(tmp_path, monkeypatch, name)
+    opened = count_opens(monkeypatch, ".json", ".pt")
+    plan = [
+        "--experiment",
+        "table2",
+        "--predictor",
+        name,
+        "--humans",
+        "2",
+        "--robots",
+        "1",
+        "--episodes",
+        "1",
+    ]
+    assert (
+        main(["sweep", *plan, "--margins", "conformal:0.1", "--dry-run", "--out", str(tmp_path / "s")]) == 2
+    )
+    *notes, error = capsys.readouterr().err.splitlines()
+    assert notes[0].startswith(f"note: methods 'CMPC', 'DMPC': the closed-loop margins of {name!r} at alpha")
+    assert error.startswith(f"crowdmpc sweep: error: checkpoint {shipped / name}.pt has sha256 ")
+    read = {path.name: n for path, n in opened.items() if path.parent == shipped}
+    assert read == {"manifest.json": 1, f"{name}.json": 1, f"{name}.pt": 1, "calibrations.json": 1}

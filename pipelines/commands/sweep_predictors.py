@@ -1,0 +1,96 @@
+"""What a sweep's plan reads of the zoos before any worker starts (``check_predictors``): the entry each
+of its predictors loads and the model it loads, read once for the other checks and the notes, a refusal
+kept for the notes first (``read_predictors``)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, NamedTuple
+
+from pipelines.errors import PipelineError
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+    from pipelines.experiments.cells import Experiment
+    from pipelines.loop.margins_read import Planned
+    from predictors.base import Predictor
+    from predictors.errors import PredictorError
+    from predictors.manifest import ZooEntry
+
+
+class PlanModels(NamedTuple):
+    """What ``check_predictors`` read of the zoos, for the other checks and the notes."""
+
+    loaded: dict[str, Predictor]  # the zoo models the plan's methods plan with, by name
+    entries: dict[str, ZooEntry]  # the zoo entry each of them loads (a registered predictor has none)
+    # the calibration block each method plans with, by label, or its refusal (``planned_margins``'), None:
+    # not looked up yet
+    blocks: dict[str, Planned] | None = None
+    # ``read_predictors``: the refusal of a model that does not load (the first, in name order: the others
+    # are not loaded), which ``check_predictors`` raises; ``loaded`` then holds the models before it
+    refused: PipelineError | PredictorError | None = None
+
+
+def check_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None = None) -> PlanModels:
+    """Fail before starting workers, not once per episode in errors.jsonl: every predictor is registered or
+    in a zoo, a zoo model's kind is registered (a plugin's, with --plugin, which the workers inherit), and it
+    loads as simulate loads it (its files' sha256 as its manifest records them, its net's contract), each
+    refusal simulate's one line. ``chosen_by``: a predictor's name -> where the run chose it ("run.toml:
+    controller.predictor", "--predictors"), which its refusal names first. Returns the zoo models loaded,
+    by name, for the couplings' and margins' checks (``check_plan``), with their entries, for the notes
+    (``method_notes``): each read again, a `zoo add --replace` between the reads had one check pass weights
+    the next did not see."""
+    models = read_predictors(experiment, chosen_by)
+    if models.refused is not None:
+        raise models.refused
+    return models
+
+
+def read_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None = None) -> PlanModels:
+    """``check_predictors``' reads, a model whose kind is not registered or that does not load kept as
+    ``refused`` (the other refusals raised) with the entries of every zoo predictor the plan names, so that
+    the notes printed before that refusal describe the entries located here: they located each again and
+    looked each method's calibration block up once a note, so a corrupt social_lstm_eth.pt had Table II's
+    `sweep --margins conformal:0.1 --dry-run` read manifest.json 12 times and calibrations.json 10 times."""
+    from predictors import zoo
+    from predictors.errors import PredictorError
+    from predictors.models import model_kind
+    from predictors.registry import PREDICTORS
+
+    chosen_by = chosen_by or {}
+    # only the predictors some method plans with: an orca or straight column loads none, and registered ones
+    # need no zoo (a damaged user manifest stopped a sweep of constant velocity and ORCA)
+    wanted = {name for _, spec in experiment.methods if (name := spec.predictor_name) is not None}
+    if wanted <= set(PREDICTORS):
+        return PlanModels({}, {})
+    # both manifests read once: the entry each name loads (shipped first)
+    entries: dict[str, zoo.Located] = {}
+    for located in zoo.zoo_entries():
+        entries.setdefault(located.entry.name, located)
+    known = set(PREDICTORS) | set(entries)
+    missing = sorted(wanted - known)
+    if missing:
+        where = next((chosen_by[name] for name in missing if name in chosen_by), None)
+        option = "--predictors" if experiment.predictor_list else "--predictor"
+        hint = f"check the names {option} gives, or " if where is None else ""
+        raise PipelineError(
+            f"{'' if where is None else f'{where}: '}experiment {experiment.name!r} needs predictors "
+            f"{missing} that are not available; available: {sorted(known)} ({hint}train or fetch the zoo "
+            "models)"
+        )
+    names = sorted(wanted - set(PREDICTORS))
+    found = {name: entries[name].entry for name in names}
+    loaded: dict[str, Predictor] = {}
+    for name in names:
+        located = entries[name]
+        where = f"{chosen_by[name]}: " if name in chosen_by else ""
+        try:
+            model_kind(located.entry.model)
+        except PredictorError as exc:
+            refused = PipelineError(f"{where}predictor {name!r} of the {located.source} zoo: {exc}")
+            return PlanModels(loaded, found, refused=refused)
+        try:
+            loaded[name] = zoo.load_located(located)  # what every worker would do first, and fail at
+        except (PipelineError, PredictorError) as exc:
+            return PlanModels(loaded, found, refused=PipelineError(f"{where}{exc}") if where else exc)
+    return PlanModels(loaded, found)
