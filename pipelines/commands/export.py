@@ -77,6 +77,7 @@ def _notes(predictor, args: argparse.Namespace, entry: ZooEntry | None) -> list[
     to predict (its later steps extrapolate, as ``simulate`` notes for the MPC), a generator's zero noise
     (the function is one deterministic future of many); a plugin net whose module changed since training is
     said before the load (``run``). ``entry``: the zoo entry ``predictor`` was loaded from (None: none)."""
+    from pipelines.commands.simulate_checks import extrapolated_steps
     from predictors.base import DT
     from predictors.registry import entry_prediction_length
     from predictors.social_lstm_predictors import SocialGANPredictor
@@ -86,7 +87,7 @@ def _notes(predictor, args: argparse.Namespace, entry: ZooEntry | None) -> list[
     if trained is not None and args.horizon > trained:
         notes.append(
             f"note: --horizon {args.horizon} is past the {trained} steps ({trained * DT:g} s) {args.name!r} "
-            f"was trained to predict: the function's steps {trained + 1}..{args.horizon} are extrapolated"
+            f"was trained to predict: the function's {extrapolated_steps(trained, args.horizon)}"
         )
     if isinstance(predictor, SocialGANPredictor):
         notes.append(

@@ -279,8 +279,17 @@ def horizon_note(spec: ControllerSpec, entry: ZooEntry | None) -> str | None:
         return None
     return (
         f"note: the MPC plans {horizon} steps ahead and {spec.predictor_name!r} was trained to predict "
-        f"{trained} ({trained * DT:g} s): its steps {trained + 1}..{horizon} are extrapolated"
+        f"{trained} ({trained * DT:g} s): its {extrapolated_steps(trained, horizon)}"
     )
+
+
+def extrapolated_steps(trained: int, horizon: int) -> str:
+    """ "steps 13..14 are extrapolated", or "step 13 is extrapolated" for one step past ``trained`` (not
+    "steps 13..13"): the steps of a ``horizon``-step rollout past the net's training length (``export``'s
+    note says it too)."""
+    if horizon == trained + 1:
+        return f"step {horizon} is extrapolated"
+    return f"steps {trained + 1}..{horizon} are extrapolated"
 
 
 def size_note(spec: ControllerSpec, n_humans: int, n_robots: int) -> str | None:

@@ -26,6 +26,29 @@ def test_export_notes_a_horizon_past_training_and_a_generators_zero_noise(tmp_pa
         assert "note:" not in capsys.readouterr().err
 
 
+def test_one_step_past_the_training_length_is_said_as_one_step(tmp_path, capsys):
+    """--horizon 13 of a net trained on 12 steps said "steps 13..13 are extrapolated"."""
+    out = tmp_path / "lstm.casadi"
+    argv = [
+        "export",
+        "social_lstm_eth",
+        "--out",
+        str(out),
+        "--humans",
+        "2",
+        "--robots",
+        "1",
+        "--horizon",
+        "13",
+    ]
+    assert main(argv) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if line.startswith("note:")]
+    assert notes == [
+        "note: --horizon 13 is past the 12 steps (4.8 s) 'social_lstm_eth' was trained to predict: the "
+        "function's step 13 is extrapolated"
+    ]
+
+
 def test_a_large_export_of_a_net_is_said_to_take_long_before_it_starts(tmp_path, capsys, monkeypatch):
     """50 humans and 12 robots over 100 steps ran for 8 minutes in one CasADi call, deaf to Ctrl-C, unsaid."""
     from pipelines.commands import export

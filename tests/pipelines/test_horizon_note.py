@@ -47,8 +47,9 @@ def test_no_note_within_the_training_length(spec):
 def test_the_note_names_the_horizon_the_model_and_the_extrapolated_steps():
     assert horizon_note(_spec("dmpc", "social_lstm_eth", 13)) == (
         "note: the MPC plans 13 steps ahead and 'social_lstm_eth' was trained to predict 12 (4.8 s): its "
-        "steps 13..13 are extrapolated"
-    )
+        "step 13 is extrapolated"
+    )  # one step past: not "steps 13..13"
+    assert horizon_note(_spec("dmpc", "social_lstm_eth", 15)).endswith("its steps 13..15 are extrapolated")
 
 
 def test_a_recorded_training_length_is_the_one_compared(monkeypatch):
