@@ -27,7 +27,7 @@ class FileStats:
     agents_max: int
     types: tuple[int, int, int, int]  # scenes of TrajNet++ type I, II, III, IV (untagged scenes not counted)
     fps: tuple[float | None, ...] = ()  # the scenes' distinct frame rates, None for scenes without one
-    untagged: int = 0  # scenes without a tag (tag 0: uncategorised, as `data prepare --no-tags` writes them)
+    untagged: int = 0  # scenes without a tag (tag 0: uncategorised; _untagged_cause says who writes them)
     odd_tags: int = 0  # scenes whose tag is no TrajNet++ type: [2.0, []], [5, []], "III" (the Reader's any)
     odd_example: str = ""  # the first of those tags, as the file holds it
 
@@ -139,15 +139,40 @@ def tag_notes(stats: list[FileStats]) -> list[str]:
         for s in stats
         if s.odd_tags
     ]
-    untagged = [s for s in stats if s.untagged]
-    if untagged:
-        n = sum(s.untagged for s in untagged)
-        where = str(untagged[0].path) if len(untagged) == 1 else f"{len(untagged)} files"
+    causes: dict[str, list[FileStats]] = {}  # one note per cause, in the order of the files
+    for s in stats:
+        if s.untagged:
+            causes.setdefault(_untagged_cause(s), []).append(s)
+    for cause, files in causes.items():
+        n = sum(s.untagged for s in files)
+        where = str(files[0].path) if len(files) == 1 else f"{len(files)} files"
         notes.append(
-            f"note: {n} scene{'s' * (n != 1)} in {where} {'are' if n != 1 else 'is'} untagged (`data prepare "
-            "--no-tags` writes them so): left out of the types column"
+            f"note: {n} scene{'s' * (n != 1)} in {where} {'are' if n != 1 else 'is'} untagged ({cause}): "
+            "left out of the types column"
         )
     return notes
+
+
+def _untagged_cause(s: FileStats) -> str:
+    """Why a file's scenes carry no type (tag 0, or none, which the Reader reads as 0): blaming `data
+    prepare --no-tags` misled for a TrajNet++ test file, whose scenes hold only the observed steps and are
+    tagged 0 by its converter (trajnetplusplusdataset's ``Scenes.rows_to_file``): the ground truth, which the
+    tags are computed from, is withheld; its test_private/ twin holds both. ``s``: a file with untagged
+    scenes."""
+    from predictors.data.locate import load_manifest
+
+    split = s.path.parent
+    manifest = load_manifest(split.parent)
+    if manifest is not None and f"{split.name}/{s.path.name}" in manifest.get("files", {}):
+        parameters = manifest.get("parameters")
+        if isinstance(parameters, dict) and parameters.get("categorized") is False:
+            return "`data prepare --no-tags` wrote them so"
+    elif "test" in (split.name, split.parent.name) and s.untagged == s.scenes:  # test/real_data/NAME.ndjson
+        return (
+            "a TrajNet++ test file tags every scene 0: its ground truth is withheld, and the tags with it; "
+            "test_private/ holds both"
+        )
+    return "tag 0 or none: uncategorised, as `data prepare --no-tags` and TrajNet++'s test files write them"
 
 
 def _shown_fps(fps: tuple[float | None, ...]) -> str:

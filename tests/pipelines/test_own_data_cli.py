@@ -33,9 +33,29 @@ def test_stats_of_one_file_counts_repeated_rows_once_and_shows_its_rate(tmp_path
     shown = "5 track rows repeat an earlier one (same pedestrian and frame); counted once"
     assert err.splitlines() == [
         f"note: {walk}: {shown}",
-        f"note: 2 scenes in {walk} are untagged (`data prepare --no-tags` writes them so): left out of the "
-        "types column",
+        f"note: 2 scenes in {walk} are untagged (tag 0 or none: uncategorised, as `data prepare --no-tags` "
+        "and TrajNet++'s test files write them): left out of the types column",
     ]
+
+
+def test_untagged_scenes_are_said_with_their_cause(tmp_path, capsys):
+    """A TrajNet++ test file's scenes are tagged 0 because its ground truth is withheld: the note blamed
+    `data prepare --no-tags`, which wrote no such file; a prepared --no-tags folder's are its doing."""
+    withheld = write_walk_file(tmp_path / "release" / "test" / "real_data" / "biwi_eth.ndjson")
+    code, _, err = run(capsys, "data", "stats", str(tmp_path / "release"))
+    assert code == 0 and err.splitlines() == [
+        f"note: 2 scenes in {withheld} are untagged (a TrajNet++ test file tags every scene 0: its ground "
+        "truth is withheld, and the tags with it; test_private/ holds both): left out of the types column"
+    ]
+    raw = write_tiny_ewap(tmp_path / "raw")
+    assert (
+        run(capsys, "data", "prepare", "--raw", str(raw), "--out", str(tmp_path / "p"), "--no-tags")[0] == 0
+    )
+    code, _, err = run(capsys, "data", "stats", str(tmp_path / "p"))
+    assert code == 0 and err.splitlines()[-1].endswith(
+        " in 6 files are untagged (`data prepare --no-tags` wrote them so): left out of the types column"
+    )
+    assert "withheld" not in err  # its test/ files hold the ground truth
 
 
 def test_stats_shows_scenes_without_a_rate(tmp_path, capsys):
