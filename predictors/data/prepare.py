@@ -94,9 +94,34 @@ def prepare_ewap(
         manifest = _prepare_into(staging, raw_dir, sources, acceptance, categorize_scenes, seed, fractions,
                                  references, progress, log, log_dir, note or _to_stderr)  # fmt: skip
         _install(staging, out_dir, manifest)
+    except OSError as exc:
+        named = _naming_the_output(exc, (staging, out_dir), log_dir)
+        if named is None:
+            raise
+        raise named from None
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return manifest
+
+
+def _naming_the_output(exc: OSError, folders: tuple[Path, Path], log_dir: Path) -> OSError | None:
+    """``exc`` raised again naming the output file under ``log_dir`` it was writing, None if it names no
+    file of ``folders`` (the staging folder, the resolved output): an EIO at a sync (SyncFailed) named
+    ``.out.prepare-PID.tmp/train/.biwi_eth.ndjson.PID.tmp``, a name the user never gave and that is removed
+    before the line is read. A temporary's ``.NAME.PID.tmp`` and a copy's ``NAME.part`` (``_move``) are
+    NAME's."""
+    if exc.filename is None or exc.filename2 is not None or exc.errno is None:
+        return None
+    path = Path(os.fsdecode(exc.filename))
+    for folder in folders:
+        if path.is_relative_to(folder):
+            name = path.name.removesuffix(".part")
+            if name.startswith(".") and name.endswith(".tmp"):  # write_scenes' .NAME.PID.tmp
+                stem, _, pid = name[1:-4].rpartition(".")
+                name = stem if stem and pid.isdigit() else name
+            named = log_dir / path.parent.relative_to(folder) / name
+            return type(exc)(exc.errno, exc.strerror, str(named))
+    return None
 
 
 def _prepare_into(

@@ -234,3 +234,30 @@ def test_a_files_data_the_disk_did_not_take_ends_in_one_line(tmp_path, monkeypat
     (line,) = capsys.readouterr().err.strip().splitlines()[-1:]
     assert "could not write " in line and "(Input/output error: its data did not reach the disk)" in line
     assert not (out / "manifest.json").exists()
+
+
+def test_a_failed_sync_in_data_prepare_names_the_output_not_its_staging_file(tmp_path, monkeypatch, capsys):
+    """The line named prepare's staging file (.prepared.prepare-PID.tmp/train/.biwi_eth.ndjson.PID.tmp),
+    removed before it was read, not the output under the --out the user gave."""
+    import errno
+
+    from pipelines.cli import main
+    from predictors.data import prepare
+
+    _failing_fsync(monkeypatch, errno.EIO, errno.EIO)
+    raw = write_tiny_ewap(tmp_path / "data")
+    monkeypatch.chdir(tmp_path)
+    assert main(["data", "prepare", "--raw", str(raw), "--out", "prepared"]) == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1] == (
+        "crowdmpc data prepare: error: could not write prepared/train/biwi_eth.ndjson (Input/output error: "
+        "its data did not reach the disk); check the disk or its mount (dmesg) and run the command again"
+    )
+    # the files' syncs at the install (staging/NAME), and a copy's across file systems (NAME.part)
+    staging, out = tmp_path / ".prepared.prepare-7.tmp", tmp_path / "prepared"
+    for failed in (staging / "val" / "biwi_hotel.ndjson", out / "val" / "biwi_hotel.ndjson.part"):
+        exc = prepare._naming_the_output(
+            OSError(errno.EIO, "Input/output error", str(failed)), (staging, out), out
+        )
+        assert exc is not None and exc.filename == str(out / "val" / "biwi_hotel.ndjson")
+    elsewhere = OSError(errno.EIO, "Input/output error", str(tmp_path / "other.ndjson"))
+    assert prepare._naming_the_output(elsewhere, (staging, out), out) is None
