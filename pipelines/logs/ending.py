@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, Final
 
 import numpy as np
@@ -173,6 +173,32 @@ def titled(rec: Recording) -> str:
     (review's figures once named neither: a timeout read as any run)."""
     outcome = recording_outcome(rec)
     return rec.label if outcome is None else f"{rec.label}: {outcome}"
+
+
+def clock_decimals(dt: float) -> int:
+    """Decimals that show every multiple of ``dt`` (s) as it is, 1 to 3: with one, a 0.25 s step's clock
+    read 0.2, 0.8, 1.2 s at 0.25, 0.75, 1.25 s."""
+    return next((d for d in (1, 2) if abs(round(dt, d) - dt) < 1e-9), 3)
+
+
+def frame_texts(rec: Recording, times: np.ndarray, dt: float) -> Callable[[int], tuple[str, str]]:
+    """An animation frame's title and clock at recorded state ``row`` of ``times`` (s), as a function of
+    ``row`` (the clock to ``clock_decimals(dt)``, ``dt`` the step in s): the end only on the last frame
+    ("seed 0: timeout at 5.2 s (time limit 6 s)"), before it the label, and the clock the time so far of
+    the end's ("t = 1.2 s of 5.2 s"). Every frame once carried the end's title, so that a robot just setting
+    off read "timeout at 5.2 s", a contact's first frame "robot-human contact at 3.2 s"; the gym's frames
+    say the end only once reached too (``ended_text``)."""
+    outcome = recording_outcome(rec)  # once: the file's end, read for every frame otherwise
+    decimals = clock_decimals(dt)
+    of = "" if outcome is None else f" of {times[-1]:.{decimals}f} s"
+    truncated = "   (truncated file)" if rec.truncated else ""
+
+    def texts(row: int) -> tuple[str, str]:
+        last = row == len(times) - 1
+        title = rec.label if outcome is None or not last else f"{rec.label}: {outcome}"
+        return title, f"t = {times[row]:.{decimals}f} s{of}{truncated}"
+
+    return texts
 
 
 def compare_labels(a: Recording, b: Recording) -> dict[str, str]:

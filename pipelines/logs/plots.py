@@ -15,7 +15,7 @@ from typing import Any, Final
 import numpy as np
 
 from pipelines.errors import PipelineError
-from pipelines.logs.ending import compare_labels, titled
+from pipelines.logs.ending import compare_labels, frame_texts, titled
 from pipelines.logs.reader import Recording
 from pipelines.logs.view import EpisodeView, episode_view
 from pipelines.whole_files import save_figure
@@ -285,12 +285,6 @@ def _leaves(start: np.ndarray, points: np.ndarray) -> bool:
     return bool(np.any(np.abs(points - start) > 1e-3))
 
 
-def clock_decimals(dt: float) -> int:
-    """Decimals that show every multiple of ``dt`` (s) as it is, 1 to 3: with one, a 0.25 s step's clock
-    read 0.2, 0.8, 1.2 s at 0.25, 0.75, 1.25 s."""
-    return next((d for d in (1, 2) if abs(round(dt, d) - dt) < 1e-9), 3)
-
-
 def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], EpisodeView]:
     """The animation's figure, its frame function (recorded state ``row`` -> changed artists) and the view."""
     from matplotlib.figure import Figure
@@ -304,7 +298,7 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
     fig = Figure(figsize=(6, 6.5), layout="constrained")
     ax = fig.add_subplot()
     frame_axes(ax, view.robot_positions, view.human_positions, view.robot_goals)
-    ax.set_title(titled(rec), fontsize=9)
+    ax.set_title(rec.label, fontsize=9)  # the end's only on the last frame (frame_texts)
     ax.plot(*view.robot_goals.T, "*", color=GOAL_COLOR, mec="k", mew=0.5, ms=14, zorder=1)
     robots = [Circle((0, 0), view.radius, fc=_robot_color(i), ec="k", lw=0.5, zorder=3) for i in range(m)]
     humans = [Circle((0, 0), view.radius, fill=False, ec=HUMAN_COLOR, lw=1.2, zorder=3) for _ in range(n)]
@@ -316,8 +310,8 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
     plans = [ax.plot([], [], "--", color=_robot_color(i), lw=1.2)[0] for i in range(m)]
     predictions = [ax.plot([], [], ":", color=HUMAN_COLOR, lw=1.0)[0] for _ in range(n)]
     clock = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=9)
-    decimals = clock_decimals(view.dt)
     entries = _animation_legend(fig, view, sensor)
+    texts = frame_texts(rec, view.times, view.dt)
 
     def draw(row: int) -> list[Any]:
         step = int(view.steps[row])
@@ -342,16 +336,26 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
                 else np.empty((0, 2))
             )
             line.set_data(pts[:, 0], pts[:, 1])
-        clock.set_text(
-            f"t = {view.times[row]:.{decimals}f} s" + ("   (truncated file)" if rec.truncated else "")
-        )
+        title, said = texts(row)
+        ax.title.set_text(title)
+        clock.set_text(said)
         drawn = {  # a line of some length: a constant-velocity prediction of a standing crowd is none
             "robot path": _leaves(view.robot_positions[0][None], view.robot_positions[: row + 1]),
             "robot plan": plan is not None and _leaves(view.robot_positions[row][:, None], plan),
             "predicted human path": prediction is not None
             and _leaves(view.human_positions[row][None], prediction),
         }
-        return [*robots, *ranges, *humans, *trails, *plans, *predictions, *_show_drawn(entries, drawn), clock]
+        return [
+            *robots,
+            *ranges,
+            *humans,
+            *trails,
+            *plans,
+            *predictions,
+            *_show_drawn(entries, drawn),
+            ax.title,
+            clock,
+        ]
 
     return fig, draw, view
 

@@ -43,8 +43,28 @@ def test_a_timeouts_titles_say_when_and_at_which_limit(timed_out):
     plotted, _ = recording_figure(rec)
     assert plotted.axes[0].get_title().splitlines() == [f"straight / circle / seed 0: {said}", "agents at "
                                                         "t = 0, 1.2, 2.4, 4, 5.2 s"]  # fmt: skip
-    animated, _, _ = animation_figure(rec)
-    assert animated.axes[0].get_title() == f"straight / circle / seed 0: {said}"
+    animated, draw, view = animation_figure(rec)
+    assert draw(len(view.times) - 1)[-2:] == [animated.axes[0].title, animated.axes[0].texts[0]]
+    assert animated.axes[0].get_title() == f"straight / circle / seed 0: {said}"  # its last frame
+
+
+def test_an_animation_says_the_end_only_on_its_last_frame(timed_out):
+    """review --animate titled every frame "... timeout at 5.2 s (time limit 6 s)", the first, of robots
+    setting off, too. Frames before the end now say the label, their clock the time so far of the end's."""
+    from pipelines.logs.plots import animation_figure
+    from pipelines.logs.reader import read_recording
+
+    fig, draw, view = animation_figure(read_recording(timed_out[1]))
+    ax = fig.axes[0]
+    frames = {}
+    for row in (0, 3, len(view.times) - 1):
+        draw(row)
+        frames[row] = (ax.get_title(), ax.texts[0].get_text())
+    assert list(frames.values()) == [
+        ("straight / circle / seed 0", "t = 0.0 s of 5.2 s"),
+        ("straight / circle / seed 0", "t = 1.2 s of 5.2 s"),
+        ("straight / circle / seed 0: timeout at 5.2 s (time limit 6 s)", "t = 5.2 s of 5.2 s"),
+    ]
 
 
 def test_an_animation_frame_lists_only_what_it_draws(timed_out):

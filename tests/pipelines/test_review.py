@@ -743,6 +743,7 @@ def test_the_animations_clock_shows_the_recorded_times(runs, monkeypatch):
     import dataclasses
 
     import pipelines.logs.plots as plots
+    from pipelines.logs.ending import clock_decimals
 
     def quarter_steps(rec):
         view = episode_view(rec)
@@ -750,8 +751,10 @@ def test_the_animations_clock_shows_the_recorded_times(runs, monkeypatch):
 
     monkeypatch.setattr(plots, "episode_view", quarter_steps)
     _, draw, _ = plots.animation_figure(read_recording(runs[0].path))
-    assert [draw(row)[-1].get_text() for row in (1, 3, 5)] == ["t = 0.25 s", "t = 0.75 s", "t = 1.25 s"]
-    assert [plots.clock_decimals(dt) for dt in (0.4, 0.1, 0.25, 0.05, 0.125)] == [1, 1, 2, 2, 3]
+    assert [draw(row)[-1].get_text() for row in (1, 3, 5)] == [
+        f"t = {t} s of 2.00 s" for t in ("0.25", "0.75", "1.25")
+    ]
+    assert [clock_decimals(dt) for dt in (0.4, 0.1, 0.25, 0.05, 0.125)] == [1, 1, 2, 2, 3]
 
 
 def test_a_run_without_plans_is_drawn_to_its_end(tmp_path):
