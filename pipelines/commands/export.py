@@ -97,6 +97,11 @@ def _notes(predictor, args: argparse.Namespace, entry: ZooEntry | None) -> list[
     return notes
 
 
+def _counted(n: int, noun: str) -> str:
+    """ "1 human", "3 humans", "0 robots": the printout said "1 humans, 1 robots"."""
+    return f"{n} {noun}{'s' * (n != 1)}"
+
+
 def _check_replaces_an_export(out: Path) -> None:
     """An existing file is replaced only if it is empty or a CasADi function file (an earlier export): a
     mistyped --out must not overwrite a README, a data file or a recording, as --json and --plot do not."""
@@ -194,8 +199,8 @@ def run(args: argparse.Namespace) -> int:
     _save(function, args.out)
     size = predictor.context_size(args.humans, args.robots)
     print(
-        f"wrote {args.out}: {function.name()} for {args.humans} humans, {args.robots} robots, "
-        f"horizon {args.horizon} (exported in {seconds:.2f} s)"
+        f"wrote {args.out}: {function.name()} for {_counted(args.humans, 'human')}, "
+        f"{_counted(args.robots, 'robot')}, horizon {args.horizon} (exported in {seconds:.2f} s)"
     )
     if parity is not None:
         from predictors.export.parity import PARITY_TOLERANCE

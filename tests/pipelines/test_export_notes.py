@@ -49,6 +49,15 @@ def test_one_step_past_the_training_length_is_said_as_one_step(tmp_path, capsys)
     ]
 
 
+def test_the_printout_counts_one_human_and_one_robot_in_the_singular(tmp_path, capsys):
+    """`export constant_velocity --humans 1 --robots 1` printed "for 1 humans, 1 robots"."""
+    out = tmp_path / "cv.casadi"
+    assert main(["export", "constant_velocity", "--out", str(out), "--humans", "1", "--robots", "1"]) == 0
+    assert " for 1 human, 1 robot, horizon 4 (exported in " in capsys.readouterr().out.splitlines()[0]
+    assert main(["export", "constant_velocity", "--out", str(out), "--humans", "2", "--robots", "0"]) == 0
+    assert " for 2 humans, 0 robots, horizon 4 (exported in " in capsys.readouterr().out.splitlines()[0]
+
+
 def test_a_large_export_of_a_net_is_said_to_take_long_before_it_starts(tmp_path, capsys, monkeypatch):
     """50 humans and 12 robots over 100 steps ran for 8 minutes in one CasADi call, deaf to Ctrl-C, unsaid."""
     from pipelines.commands import export
