@@ -17,7 +17,7 @@ than the pooled guarantee (the caveats of ``predictors.conformal`` on exchangeab
 ``MOTION_CLASSES`` (index: name): 0 ``new``, observed for fewer than L positions (its window is not full, so
 its speed is unknown); otherwise by the net speed over the observed window, ``|x_t - x_{t-L+1}| / ((L-1)
 tau)``: 1 ``standing`` below ``STANDING_SPEED``, 2 ``slow`` below ``WALKING_SPEED``, 3 ``walking``. In the
-closed loop (``pipelines.loop.margins.observed_classes``) L is ``CLASS_WINDOW``, the window closed-loop
+closed loop (``pipelines.loop.motion_classes.observed_classes``) L is ``CLASS_WINDOW``, the window closed-loop
 calibration classifies with, whatever history the simulator keeps: a margin is calibrated for one classifier.
 """
 

@@ -29,7 +29,8 @@ import numpy as np
 from crowdsim.scenarios import MAX_HUMANS
 from crowdsim.world import is_sensor_range
 from pipelines.errors import PipelineError
-from pipelines.loop.margins import MarginSpec, observed_classes
+from pipelines.loop.margins import MarginSpec
+from pipelines.loop.motion_classes import observed_classes
 from predictors.progress import progress_bar
 
 if TYPE_CHECKING:

@@ -18,7 +18,8 @@ from crowdsim.scenarios import MAX_HUMANS
 from crowdsim.world import WORLD, WorldFacts
 from mpc.config import MPCConfig
 from pipelines.errors import PipelineError
-from pipelines.loop.margins import CALIBRATED_MODES, human_observed
+from pipelines.loop.margins import CALIBRATED_MODES
+from pipelines.loop.motion_classes import human_observed
 from pipelines.loop.observed import agent, check_fields, check_magnitudes, check_positions
 from pipelines.loop.spec import ControllerSpec
 from predictors.backfill import backfill

@@ -13,7 +13,7 @@ import numpy as np
 from crowdsim.control import ControlOutput
 from mpc.dynamics import rollout_numpy
 from mpc.guidance import guidance_targets, lookahead
-from pipelines.loop.margins import observed_classes
+from pipelines.loop.motion_classes import observed_classes
 from pipelines.loop.step_record import allowances_record
 from predictors.conformal_classes import MOTION_CLASSES
 

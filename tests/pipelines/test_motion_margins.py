@@ -262,7 +262,7 @@ def _late_human(step, observed=None):
 def test_a_human_tracked_for_two_steps_is_new_whatever_the_episode_step():
     """Counted as seen since step 0 (``obs.step + 1``), a human who entered late had a padded past that read
     as "slow" (or "standing" when seen once): a small margin instead of the "new" class's large one."""
-    from pipelines.loop.margins import observed_classes
+    from pipelines.loop.motion_classes import observed_classes
     from predictors.conformal_classes import MOTION_CLASSES
 
     assert MOTION_CLASSES[observed_classes(_late_human(1))[0]] == "new"

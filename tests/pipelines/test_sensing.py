@@ -213,7 +213,7 @@ def test_calibrations_scorer_classes_people_behind_a_sensor_as_the_controller_di
     from types import SimpleNamespace
 
     from pipelines.experiments.calibrate import PredictionErrors
-    from pipelines.loop.margins import observed_classes
+    from pipelines.loop.motion_classes import observed_classes
 
     sensor = RangeLimited(Predicting(), radius=3.0)
     before, now = observation(9, [[1.0, 0.0], [5.0, 0.0]], 8), observation(10, [[1.1, 0.0], [2.5, 0.0]], 8)
