@@ -29,10 +29,8 @@ from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import CloseFailed, EpisodeFailed, PipelineError
 from pipelines.loop.contract import (
     called,
-    check_run,
     checked_description,
     checked_meta,
-    checked_observers,
     checked_output,
     episode_meta,
     handed_out,
@@ -49,6 +47,7 @@ from pipelines.loop.interrupt import interrupts_between_steps
 from pipelines.loop.progress import StepShown
 from pipelines.loop.record import EpisodeRecord, SolverStats
 from pipelines.loop.record import summarize as summarize  # its callers import it from here
+from pipelines.loop.run_arguments import check_run, checked_observers
 from predictors.errors import PredictorError
 from predictors.progress import progress_bar
 

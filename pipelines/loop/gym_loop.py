@@ -39,7 +39,6 @@ from pipelines.loop.contract import (
     called,
     checked_description,
     checked_meta,
-    checked_observers,
     checked_output,
     episode_meta,
     handed_out,
@@ -53,6 +52,7 @@ from pipelines.loop.episode import (
     replayed_recording,
 )
 from pipelines.loop.interrupt import interrupts_between_steps
+from pipelines.loop.run_arguments import checked_observers
 from predictors.errors import short_repr
 
 
