@@ -26,8 +26,8 @@ if TYPE_CHECKING:
 
     import torch
 
+    from predictors.kinds import ModelKind
     from predictors.learned import LearnedPredictor
-    from predictors.models import ModelKind
 
 # The predictor classes a config's informational "class" may name: the generic one, the Social-LSTM class of
 # the shipped checkpoints (written before model kinds), and the GAN generator's (a kind with ``adversarial``).

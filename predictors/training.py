@@ -160,7 +160,7 @@ class PredictorModule(_PredictorModule):
     rollout (``nets.rollout``); Gaussian NLL when the net has a Gaussian head and the loss is "gaussian",
     else L2 on the mean steps.
 
-    ``net_config`` holds values over the kind's defaults (``models.ModelKind.config``); the hyper-parameters
+    ``net_config`` holds values over the kind's defaults (``kinds.ModelKind.config``); the hyper-parameters
     record the whole validated config. ``model=None`` is a checkpoint from before models were recorded
     (``legacy_model``).
     """

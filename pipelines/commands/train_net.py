@@ -72,7 +72,7 @@ def net_config_of(args: argparse.Namespace, base: dict[str, Any] | None = None) 
     ):
         if value is None:
             continue
-        if not kind.has_field(key) or key in kind.defining:  # the kind fixes it: models.ModelKind.defining
+        if not kind.has_field(key) or key in kind.defining:  # the kind fixes it: kinds.ModelKind.defining
             why = kind.defining.get(key) or (
                 "it has no social pooling" if key == "pooling" else f"its config has no {key}"
             )
