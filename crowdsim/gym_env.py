@@ -88,8 +88,8 @@ Per-robot info arrays have ``max_robots`` rows, as the action and the observatio
 (``crowdsim.plotting``) into a ``(480, 640, 3)`` uint8 array.
 
 The observation's array and bounds and ``ComparableObservation`` are built in crowdsim.gym_observation, the
-reward and the step's distances in crowdsim.gym_reward; this module exports their names. ``reset``'s options
-are checked in crowdsim.gym_options.
+reward and the step's distances in crowdsim.gym_reward; this module exports their names. A step's reward, end
+and info are put together in crowdsim.gym_step; ``reset``'s options are checked in crowdsim.gym_options.
 """
 
 from __future__ import annotations
@@ -122,12 +122,11 @@ from crowdsim.gym_options import episode_options, numbers, warn_formation
 from crowdsim.gym_reward import (
     RewardConfig,
     as_reward_config,
-    robot_pair_info,
-    state_info,
     step_closest,
     surface_distances,
 )
-from crowdsim.metrics import COLLISION_DISTANCE, EpisodeMetrics, episode_metrics
+from crowdsim.gym_step import step_outcome
+from crowdsim.metrics import EpisodeMetrics, episode_metrics
 from crowdsim.outcome import ended_text
 from crowdsim.profiles import as_env_config
 from crowdsim.replay import Recording
@@ -288,46 +287,10 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         obs, done, native = self._sim.step(a[:m])
         self._obs = obs
 
-        cfg = self.config
-        closest = step_closest(before, obs)  # (M, N) m, within the step
-        swept = float(closest.min()) if closest.size else math.inf
-        gaps = surface_distances(closest, cfg.radius)
-        contact_in_step = gaps < 0
-        timeout = bool(native.get("timeout", False))
-        contact_ends = self.end_on_collision and bool(contact_in_step.any())
-        self._contact_ended = contact_ends
-        # A contact that ends the episode comes first (upstream CrowdNav's Collision): a step that also brings
-        # the robots to their goals is no success, in the rewards, the info and the episode's metrics alike.
-        success = bool(native.get("success", False)) and not contact_ends
-
-        def rule(gap: float) -> float:
-            return self.reward_config.step_reward(
-                gap, success=success, dt=cfg.dt, contact_ends=self.end_on_collision
-            )
-
-        reward = rule(float(gaps.min()))
-        robot_rewards = np.array([rule(float(g)) for g in gaps])
-
-        terminated = success or contact_ends
-        truncated = timeout and not terminated
+        reward, terminated, truncated, self._contact_ended, info = step_outcome(
+            before, obs, native, self.config, self.reward_config, self.end_on_collision, self.max_robots
+        )
         self._done = terminated or truncated
-        info: dict[str, Any] = {
-            "observation": ComparableObservation.of(obs),
-            **native,
-            "n_robots": obs.n_robots,
-            "accelerations": self._rows(native["accelerations"], 0.0),
-            "clipped": self._rows(native["clipped"], False),
-            **state_info(obs, cfg.radius),
-            "min_distance_between_steps": swept,
-            "collision_between_steps": swept < COLLISION_DISTANCE,
-            "contact_between_steps": bool(contact_in_step.any()),
-            **robot_pair_info(before, obs, cfg.radius),
-            "surface_distance": self._rows(gaps, math.inf),
-            "robot_rewards": self._rows(robot_rewards, 0.0),
-            "reached": self._rows(obs.robot_reached, False),
-            "success": success,
-            "timeout": timeout,
-        }
         if self._done:
             info["episode_metrics"] = self.episode_metrics()
         return self._array(obs), reward, terminated, truncated, info
@@ -386,13 +349,6 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         return metrics
 
     # ---- internals ---------------------------------------------------------------------------------------
-
-    def _rows(self, values: np.ndarray, fill: float | bool) -> np.ndarray:
-        """``values`` (one row per robot of the episode) padded to ``max_robots`` rows with ``fill``."""
-        values = np.asarray(values)
-        out = np.full((self.max_robots, *values.shape[1:]), fill, dtype=values.dtype)
-        out[: len(values)] = values
-        return out
 
     def _array(self, obs: Observation) -> np.ndarray:
         return observation_array(obs, self.max_robots, self.max_humans, self._low, self._high)
