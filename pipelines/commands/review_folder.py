@@ -67,7 +67,8 @@ def review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[li
     a warning, names several: a sweep's cells are so by design), into ``report``; the runs and the number of
     unreadable files."""
     from pipelines.logs.identity import RUN_IDENTITY
-    from pipelines.logs.review import aggregate_table, count, setups_table
+    from pipelines.logs.review import count
+    from pipelines.logs.run_tables import aggregate_table, setups_table
     from pipelines.logs.setups import drop_repeats, group_parts, groups, named_settings, short_names
 
     runs, n_unreadable = read_folder(folder, report, check)

@@ -1,4 +1,5 @@
-"""Reviewing episode recordings as text: one run's summary, a table over runs, A/B comparison.
+"""Reviewing episode recordings as text: one run's summary and A/B comparison (the tables over runs and over
+a folder's set-ups: pipelines.logs.run_tables).
 
 The summary takes the solver statistics from the per-step ``/mpc/solver`` messages rather than from
 ``/episode/metrics``, so that a truncated file (whose episode never ended) still reports them; the rates over
@@ -13,12 +14,11 @@ import os
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from datetime import UTC, datetime
-from pathlib import Path
-from typing import Any, Final
+from typing import Any
 
 import numpy as np
 
-from pipelines.logs.ending import ended_by, ends_count, ends_text, metric_rows, metric_shown
+from pipelines.logs.ending import ended_by, metric_rows, metric_shown
 from pipelines.logs.identity import differing_settings, null_none, recorded_plugins, shown
 from pipelines.logs.reader import Recording
 from pipelines.loop.record import step_time_stats
@@ -88,7 +88,8 @@ def _wall_clock(ns: int) -> str | None:
     return datetime.fromtimestamp(ns / 1e9, UTC).isoformat(timespec="seconds")
 
 
-def _fmt(value: Any) -> str:
+def fmt(value: Any) -> str:
+    """A value as the summary and the tables print it: "-" for None, yes or no, floats to three digits."""
     if value is None:
         return "-"
     if isinstance(value, bool):
@@ -96,7 +97,7 @@ def _fmt(value: Any) -> str:
     if isinstance(value, float):
         return _fmt_float(value)
     if isinstance(value, list):
-        return "[" + ", ".join(_fmt(v) for v in value) + "]"
+        return "[" + ", ".join(fmt(v) for v in value) + "]"
     if isinstance(value, dict):
         return ", ".join(f"{k} {v}" for k, v in value.items()) or "-"
     return str(value)
@@ -112,7 +113,7 @@ def _fmt_float(value: float) -> str:
 
 def count(n: Any, noun: str) -> str:
     """``n noun`` with the noun plural unless n is 1 ("1 run", "2 runs"; "-" for an unknown n)."""
-    return f"{_fmt(n)} {noun}" + ("" if str(n) == "1" else "s")
+    return f"{fmt(n)} {noun}" + ("" if str(n) == "1" else "s")
 
 
 def commit_shown(summary: dict[str, Any]) -> str | None:
@@ -134,7 +135,7 @@ def plugins_shown(summary: dict[str, Any]) -> str:
 def _code(summary: dict[str, Any]) -> str:
     """The version, the commit when the recording names one, and the plugins' files."""
     named, plugins = commit_shown(summary), plugins_shown(summary)
-    shown = f"{_fmt(summary['crowdmpc_version'])}" + (f" (commit {named})" if named else "")
+    shown = f"{fmt(summary['crowdmpc_version'])}" + (f" (commit {named})" if named else "")
     return shown + (f", plugins {plugins}" if plugins else "")
 
 
@@ -142,7 +143,7 @@ def format_summary(summary: dict[str, Any]) -> str:
     s = summary["solver"]
     rows: list[tuple[str, Any]] = [
         ("file", summary["file"]),
-        ("scenario", f"{_fmt(summary['scenario'])} (seed {_fmt(summary['seed'])})"),
+        ("scenario", f"{fmt(summary['scenario'])} (seed {fmt(summary['seed'])})"),
         ("agents", f"{count(summary['n_robots'], 'robot')}, {count(summary['n_humans'], 'human')}"),
         ("controller", summary["controller"]),
         ("predictor", summary["predictor"]),
@@ -175,193 +176,13 @@ def format_summary(summary: dict[str, Any]) -> str:
     # the full warning goes to stderr (crowdmpc review); the summary says it in a word
     rows.append(("truncated", "YES: read up to its last complete chunk" if summary["truncated"] else "no"))
     width = max(len(k) for k, _ in rows)
-    return "\n".join(f"{k.ljust(width)}  {_fmt(v)}" for k, v in rows)
+    return "\n".join(f"{k.ljust(width)}  {fmt(v)}" for k, v in rows)
 
 
-def _table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
+def text_table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
     from predictors.text_table import aligned_lines
 
-    return "\n".join(aligned_lines(header, [[_fmt(v) for v in row] for row in rows], numbers_right=False))
-
-
-_RUN_COLUMNS: Final = ("success", "collision", "timeout", "travel_time", "min_distance")
-
-
-def aggregate_table(
-    summaries: Sequence[dict[str, Any]], solve_times_s: Sequence[np.ndarray], root: Path | None = None
-) -> tuple[str, dict[str, Any]]:
-    """One row per run, then crowdsim's rates over the runs whose episode ended, and the control-step costs
-    pooled over every recorded step: ``summaries`` are the runs' ``summarize``, ``solve_times_s`` their
-    steps' times (``pipelines.logs.digest``). Runs are named by their path below ``root`` (a sweep's cells
-    hold files of the same names), else by their file's name."""
-    header = [
-        "file",
-        "controller",
-        "predictor",
-        *_RUN_COLUMNS,
-        "ended",  # what ended it: the timeout column is the metric, not success
-        "median ms",
-        "p95 ms",
-        "fallbacks",
-        "truncated",
-    ]
-    rows = [
-        [
-            str(Path(s["file"]).relative_to(root)) if root is not None else Path(s["file"]).name,
-            s["controller"],
-            s["predictor"],
-            *((s["metrics"] or {}).get(c) for c in _RUN_COLUMNS),
-            s.get("ended_by"),
-            s["solver"].get("median_ms"),
-            s["solver"].get("p95_ms"),
-            sum(s["solver"].get("fallbacks", {}).values()),
-            s["truncated"],
-        ]
-        for s in summaries
-    ]
-    ended = [s for s in summaries if s["metrics"] is not None]
-    totals: dict[str, Any] = {"runs": len(summaries), "ended": len(ended)}
-    if ended:
-        rates, unusable = _aggregate_metrics([s["metrics"] for s in ended])
-        totals.update(rates)
-        if unusable:
-            totals["unusable_metrics"] = [ended[i]["file"] for i in unusable]
-        if "episodes" in totals:  # the rates' episodes: what ended those that the timeout rate counts
-            totals["ends"] = ends_count([s for i, s in enumerate(ended) if i not in unusable])
-    times = np.concatenate([np.zeros(0), *solve_times_s])
-    if times.size:
-        totals.update({f"solve_time_{k}": v for k, v in step_time_stats(times).items()})
-        # a summary counts its fallbacks by kind over the same /mpc/solver messages
-        fallbacks = sum(sum(s["solver"].get("fallbacks", {}).values()) for s in summaries)
-        totals.update(control_steps=len(times), fallback_steps=fallbacks)
-    return _table(header, rows) + "\n\n" + _format_totals(totals), totals
-
-
-def setups_table(names: Sequence[str], totals: Sequence[dict[str, Any]]) -> str:
-    """One row per set-up of a folder: its runs, the rates over those whose episode ended (robot contact is
-    two robots touching, not in the paper), travel time and the closest approach to a human, and the
-    control step's median and p95; "-" where a set-up has none."""
-
-    def rate(t: dict[str, Any], name: str) -> str:
-        if "episodes" not in t:
-            return "-"
-        if t.get(f"{name}_rate") is None:  # a figure added later, which some run's metrics predate
-            return "n/a"
-        return f"{t[f'{name}_rate']:.1f} ({t[f'{name}_count']}/{t['episodes']})"
-
-    # "smallest", "all steps": table.md gives the median of the episodes' minima and of their medians
-    header = [
-        "set-up",
-        "runs",
-        "success %",
-        "collision %",
-        "contact %",
-        "robot contact %",
-        "mean travel time s",
-    ]
-    header += ["smallest distance m", *(f"step {k} ms (all steps)" for k in ("median", "p95"))]
-    rows = [
-        [
-            name,
-            t["runs"],
-            *(rate(t, k) for k in ("success", "collision", "contact", "robot_contact")),
-            t.get("travel_time_mean"),
-            t.get("min_distance_min"),
-            *(
-                None if "control_steps" not in t else t[f"solve_time_{k}_ms"]  # the table rounds
-                for k in ("median", "p95")
-            ),
-        ]
-        for name, t in zip(names, totals, strict=True)
-    ]
-    return _table(header, rows)
-
-
-def _format_totals(t: dict[str, Any]) -> str:
-    lines = [
-        count(t["runs"], "run")
-        + (
-            f", {t['runs'] - t['ended']} whose episode did not end (no metrics)"
-            if t["ended"] < t["runs"]
-            else ""
-        )
-        + (
-            f", {len(t['unusable_metrics'])} with metrics of another format (left out of the rates)"
-            if t.get("unusable_metrics")
-            else ""
-        )
-    ]
-    if "episodes" in t:
-        n = t["episodes"]
-        rates = ", ".join(
-            f"{name} {t[f'{name}_rate']:.1f} % ({t[f'{name}_count']}/{n})"
-            for name in ("success", "collision", "contact", "discomfort", "timeout")
-        )
-        lines += [
-            rates,
-            ends_text(t["ends"]),
-            "between steps (straight motion within each step): "
-            + ", ".join(_between_steps_rate(t, name, n) for name in ("collision", "contact")),
-            _robot_contact(t, n),
-            f"travel time {_fmt(t['travel_time_mean'])} s mean over successes "
-            f"(std {_fmt(t['travel_time_std'])} s); path length {_fmt(t['path_length_mean'])} m per robot",
-            f"min robot-human distance {_fmt(t['min_distance_mean'])} m mean, "
-            f"{_fmt(t['min_distance_min'])} m min",
-        ]
-    if "control_steps" in t:
-        lines.append(
-            f"solve time per control step: median {t['solve_time_median_ms']:.1f} ms, p95 "
-            f"{t['solve_time_p95_ms']:.1f} ms, max {t['solve_time_max_ms']:.1f} ms over "
-            f"{count(t['control_steps'], 'step')}; fallback steps {t['fallback_steps']}"
-        )
-    return "\n".join(lines)
-
-
-def _between_steps_rate(t: dict[str, Any], name: str, n: int) -> str:
-    """``collision 5.0 % (1/20)``; n/a when some run's metrics predate the between-step fields."""
-    rate, hits = t.get(f"{name}_between_steps_rate"), t.get(f"{name}_between_steps_count")
-    if rate is None or hits is None:
-        return f"{name} n/a (metrics recorded before the between-step figures)"
-    return f"{name} {rate:.1f} % ({hits}/{n})"
-
-
-def _robot_contact(t: dict[str, Any], n: int) -> str:
-    """Robots touching each other (crowdsim.metrics' ``robot_contact``, not a metric of the paper): episodes
-    and states, then episodes between steps; n/a when some run's metrics predate the field."""
-    rate, hits, states = (t.get(f"robot_contact_{k}") for k in ("rate", "count", "step_freq"))
-    figures = (
-        "n/a (metrics recorded before it)" if rate is None or hits is None else f"{rate:.1f} % ({hits}/{n})"
-    )
-    if states is not None:
-        figures += f", {states:.2f} % of states"
-    rate, hits = (t.get(f"robot_contact_between_steps_{k}") for k in ("rate", "count"))
-    if rate is not None and hits is not None:  # absent before the figure existed: nothing to add
-        figures += f"; between steps {rate:.1f} % ({hits}/{n})"
-    return f"robot-robot contact (two robots touching, not in the paper): {figures}"
-
-
-def _aggregate_metrics(recorded: list[dict[str, Any]]) -> tuple[dict[str, Any], list[int]]:
-    """crowdsim's own aggregate over EpisodeMetrics rebuilt from the recorded dicts (null was NaN or inf;
-    recordings from before the per-step counts still aggregate, their frequencies reading n/a), and the
-    indices of the records that do not rebuild (written by another version, or not by crowdmpc at all)."""
-    from crowdsim.errors import SimulationError
-    from crowdsim.metrics import EpisodeMetrics, aggregate
-
-    rebuilt, unusable = [], []
-    for i, record in enumerate(recorded):
-        try:
-            metrics = EpisodeMetrics.from_dict(record)
-            aggregate([metrics])  # its values are of the types the aggregate adds up
-        except (SimulationError, TypeError, ValueError, AttributeError):
-            unusable.append(i)
-        else:
-            rebuilt.append(metrics)
-    if not rebuilt:
-        return {}, unusable
-    return {
-        k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-        for k, v in aggregate(rebuilt).items()
-    }, unusable
+    return "\n".join(aligned_lines(header, [[fmt(v) for v in row] for row in rows], numbers_right=False))
 
 
 def compare_table(a: Recording, b: Recording) -> str:
@@ -384,7 +205,7 @@ def compare_table(a: Recording, b: Recording) -> str:
     rows.append(["fallbacks", sa["solver"].get("fallbacks"), sb["solver"].get("fallbacks")])
     rows.append(["truncated", sa["truncated"], sb["truncated"]])
     name_a, name_b = compare_names(a, b)
-    return _table(["", f"A: {name_a}", f"B: {name_b}"], rows)
+    return text_table(["", f"A: {name_a}", f"B: {name_b}"], rows)
 
 
 def compare_names(a: Recording, b: Recording) -> tuple[str, str]:

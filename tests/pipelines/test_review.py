@@ -15,7 +15,8 @@ from pipelines.errors import PipelineError
 from pipelines.logs.reader import read_recording
 from pipelines.logs.recorder import McapRecorder
 from pipelines.logs.recording import McapEpisodeRecorder
-from pipelines.logs.review import setups_table, summarize
+from pipelines.logs.review import summarize
+from pipelines.logs.run_tables import setups_table
 from pipelines.logs.schemas import ROBOTS
 from pipelines.logs.view import episode_view
 from tests.pipelines.mcap_episode import control_output, cut_before_episode_metadata, record_episode
@@ -824,7 +825,7 @@ def test_folder_totals_say_when_robots_touched(tmp_path, capsys):
 
 
 def test_robot_contact_reads_n_a_for_recordings_before_it(runs):
-    from pipelines.logs.review import aggregate_table
+    from pipelines.logs.run_tables import aggregate_table
 
     summaries = [summarize(read_recording(r.path)) for r in runs]
     text, totals = aggregate_table(summaries, [])
@@ -850,7 +851,7 @@ def test_robot_contact_reads_n_a_for_recordings_before_it(runs):
 def test_set_ups_side_by_side_say_n_a_for_robot_contact_their_runs_predate():
     """A set-up whose runs' metrics predate robot contact (None in the totals, from NaN) reads "n/a" in that
     column, one without ended episodes "-"; the other rates as before."""
-    from pipelines.logs.review import setups_table
+    from pipelines.logs.run_tables import setups_table
 
     rates = {
         f"{k}_{x}": v for k in ("success", "collision", "contact") for x, v in (("rate", 50.0), ("count", 1))

@@ -66,10 +66,10 @@ def test_a_folders_review_lets_each_recording_go_once_digested(folder, monkeypat
         held_at_the_end.append(sum(ref() is not None for ref in alive))
         return table(*args, **kwargs)
 
-    from pipelines.logs import review
+    from pipelines.logs import run_tables
 
-    table = review.aggregate_table
-    monkeypatch.setattr(review, "aggregate_table", summary_table)
+    table = run_tables.aggregate_table
+    monkeypatch.setattr(run_tables, "aggregate_table", summary_table)
     assert main(["review", str(folder), "--check", "--json", str(tmp_path / "r.json")]) == 0
     assert len(alive) == 3 and held_at_the_end == [0]
     out = capsys.readouterr().out
