@@ -52,7 +52,7 @@ def predictor_names(text: str) -> str:
     the most names a swap table takes, each well-formed), each registered or in a zoo (``predictor_name``),
     none twice; refused now with the parser's one line, not by the first sweep's exit status."""
     from pipelines.commands import first_repeat
-    from pipelines.commands.sweep import predictor_list
+    from pipelines.commands.sweep_options import predictor_list
 
     names = predictor_list(text)
     for name in names:
