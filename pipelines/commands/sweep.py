@@ -145,7 +145,8 @@ def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
     anything is written or started."""
     from pipelines.config import command_config
     from pipelines.config.recorded import report_config
-    from pipelines.experiments.log import SWEEP_FILE, check_sweep_directory
+    from pipelines.experiments.log import SWEEP_FILE
+    from pipelines.experiments.sweep_folder import check_sweep_directory
 
     # a report of the sweep in --out: its recorded config beneath what is typed
     options = config_options()

@@ -35,18 +35,17 @@ from pipelines.experiments.log import (
     ERRORS_FILE,
     SWEEP_FILE,
     EpisodeLog,
-    check_sweep_directory,
     episode_log,
     error_keys,
     mcap_path,
     read_sweep_file,
-    sweep_lock,
     write_whole,
 )
 from pipelines.experiments.resume_checks import read_recorded
 from pipelines.experiments.reuse import check_source, seed_from
 from pipelines.experiments.run_lines import lost_runs, split_lost, write_sweep_file
 from pipelines.experiments.sweep_config import SweepConfig
+from pipelines.experiments.sweep_folder import check_sweep_directory, sweep_lock
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import make_scratch_root, release_scratch_root
 from pipelines.loop.interrupt import terminate_as_interrupt

@@ -7,7 +7,7 @@ import types
 import pytest
 
 from pipelines.errors import PipelineError
-from pipelines.experiments.log import check_sweep_directory
+from pipelines.experiments.sweep_folder import check_sweep_directory
 from predictors import locking
 from tests.cli_calls import run_cli as run
 from tests.predictors.samples import write_tiny_ewap

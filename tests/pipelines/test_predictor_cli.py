@@ -143,7 +143,7 @@ def test_a_failed_train_leaves_the_out_it_found_as_it_was(tmp_path, monkeypatch,
     """A train stopped in an empty --out that existed (Ctrl-C as it started fitting) left its .train.lock
     there, and a sweep --out then refused that folder as one holding files."""
     from pipelines.commands import train_fit
-    from pipelines.experiments.log import check_sweep_directory
+    from pipelines.experiments.sweep_folder import check_sweep_directory
 
     def interrupted(*_args, **_kwargs):
         raise KeyboardInterrupt

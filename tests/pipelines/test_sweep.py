@@ -26,11 +26,12 @@ from pipelines.experiments.cells import (
     PaperFigures,
     get_experiment,
 )
-from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, EpisodeLog, error_keys, sweep_lock
+from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, EpisodeLog, error_keys
 from pipelines.experiments.report import CELLS_CSV, write_report
 from pipelines.experiments.summary import _half_width, summarize, t95, wilson_interval
 from pipelines.experiments.sweep import mcap_path, run_sweep
 from pipelines.experiments.sweep_config import SweepConfig
+from pipelines.experiments.sweep_folder import sweep_lock
 from pipelines.experiments.tables import markdown_table, mcnemar_exact, paired_success
 from pipelines.experiments.tasks import World, scenario_schedule
 from pipelines.experiments.worker import EpisodeOutcome, EpisodeWorker, is_failure
@@ -272,7 +273,7 @@ def test_a_garbled_last_line_counts_as_torn_but_one_in_the_middle_is_refused(tmp
 def test_the_kept_cut_line_is_never_written_through_a_link_or_into_a_folder(tmp_path):
     """episodes.jsonl.cut is the sweep's own file: a link planted there had the cut line appended to its
     target, and a folder of that name stopped every resume with the OS's "Is a directory"."""
-    from pipelines.experiments.log import check_sweep_directory
+    from pipelines.experiments.sweep_folder import check_sweep_directory
 
     path = tmp_path / EPISODES_FILE
     path.write_bytes(b'{"key": "a"}\n')
