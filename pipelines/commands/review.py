@@ -203,7 +203,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
         check_figure_path(args.plot, "--plot")
     if args.animate:
-        from pipelines.logs.plots import check_animation_path
+        from pipelines.logs.animation import check_animation_path
 
         check_animation_path(args.animate, "--animate")
     inputs = [args.path]
@@ -224,9 +224,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _review(args: argparse.Namespace) -> int:
+    from pipelines.logs.animation import animate_recording
     from pipelines.logs.digest import digest
     from pipelines.logs.identity import differing_settings
-    from pipelines.logs.plots import animate_recording, plot_compare, plot_recording
+    from pipelines.logs.plots import plot_compare, plot_recording
     from pipelines.logs.reader import read_recording
     from pipelines.logs.review import compare_table, format_summary
 

@@ -33,7 +33,8 @@ def test_a_timeouts_titles_say_when_and_at_which_limit(timed_out):
     """simulate --plot titled the run "... timeout, min robot-human distance ..." and review --plot and
     --animate "straight / circle / seed 0": neither said when it ended nor the limit it ran under. All three
     now say "timeout at 5.2 s (time limit 6 s)"."""
-    from pipelines.logs.plots import animation_figure, recording_figure
+    from pipelines.logs.animation import animation_figure
+    from pipelines.logs.plots import recording_figure
     from pipelines.logs.reader import read_recording
 
     figure, path = timed_out
@@ -51,7 +52,7 @@ def test_a_timeouts_titles_say_when_and_at_which_limit(timed_out):
 def test_an_animation_says_the_end_only_on_its_last_frame(timed_out):
     """review --animate titled every frame "... timeout at 5.2 s (time limit 6 s)", the first, of robots
     setting off, too. Frames before the end now say the label, their clock the time so far of the end's."""
-    from pipelines.logs.plots import animation_figure
+    from pipelines.logs.animation import animation_figure
     from pipelines.logs.reader import read_recording
 
     fig, draw, view = animation_figure(read_recording(timed_out[1]))
@@ -71,7 +72,7 @@ def test_an_animation_frame_lists_only_what_it_draws(timed_out):
     """review --animate's frame 0 listed "robot path" under the axes before any path was drawn. A frame now
     shows the entry of the paths, plans and predictions only where it draws them, hiding (not removing) the
     others so that the legend keeps its place."""
-    from pipelines.logs.plots import animation_figure
+    from pipelines.logs.animation import animation_figure
     from pipelines.logs.reader import read_recording
 
     fig, draw, view = animation_figure(read_recording(timed_out[1]))
@@ -92,7 +93,7 @@ def test_an_animation_frame_lists_only_what_it_draws(timed_out):
 def test_the_last_frame_of_a_planned_run_lists_no_plan(tmp_path):
     """The state after a run's last step has no plan and no prediction recorded: its frame drew neither and
     listed both; nor did frame 0 draw a prediction of a crowd standing still, which it listed."""
-    from pipelines.logs.plots import animation_figure
+    from pipelines.logs.animation import animation_figure
     from pipelines.logs.reader import read_recording
     from tests.pipelines.mcap_episode import record_episode
 

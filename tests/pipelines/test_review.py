@@ -211,7 +211,8 @@ def test_an_episode_without_humans_passes_the_check_and_draws(tmp_path, capsys):
     assert view.human_positions.shape == (4, 0, 2) and view.predictions[0].shape == (4, 0, 2)
     assert main(["review", str(run.path), "--plot", str(tmp_path / "p.png")]) == 0
     # and no legend names humans, which neither the plot nor the animation draws
-    from pipelines.logs.plots import animation_figure, recording_figure
+    from pipelines.logs.animation import animation_figure
+    from pipelines.logs.plots import recording_figure
 
     fig, _ = recording_figure(read_recording(run.path))
     assert not {"humans", "prediction"} & {t.get_text() for t in fig.axes[0].get_legend().get_texts()}
@@ -223,9 +224,9 @@ def test_an_episode_without_humans_passes_the_check_and_draws(tmp_path, capsys):
 def test_a_long_episode_is_animated_in_at_most_max_frames(runs, tmp_path, capsys, monkeypatch):
     """Pillow holds every frame: a 10 000-step episode needed 13 GB. Past MAX_FRAMES, one state in k (and
     the last) is drawn, each shown k steps long, so the animation keeps the episode's length."""
-    from pipelines.logs import plots
+    from pipelines.logs import animation
 
-    monkeypatch.setattr(plots, "MAX_FRAMES", 4)
+    monkeypatch.setattr(animation, "MAX_FRAMES", 4)
     gif = tmp_path / "a.gif"
     assert main(["review", str(runs[0].path), "--animate", str(gif)]) == 0  # 9 states: 0, 3, 6 and 8
     assert "(4 frames, one state in 3)" in capsys.readouterr().out
@@ -361,7 +362,7 @@ def test_a_folder_of_run_folders_is_reviewed_one_and_two_levels_down(runs, tmp_p
 @pytest.mark.skipif(shutil.which("ffmpeg") is not None, reason="ffmpeg is installed: an mp4 would be written")
 def test_mp4_without_ffmpeg_says_so(runs, tmp_path):
     with pytest.raises(PipelineError, match="needs ffmpeg"):
-        from pipelines.logs.plots import animate_recording
+        from pipelines.logs.animation import animate_recording
 
         animate_recording(read_recording(runs[0].path), tmp_path / "a.mp4")
 
@@ -743,15 +744,15 @@ def test_the_animations_clock_shows_the_recorded_times(runs, monkeypatch):
     0.75 and 1.25 s: one decimal, rounded."""
     import dataclasses
 
-    import pipelines.logs.plots as plots
+    import pipelines.logs.animation as animation
     from pipelines.logs.ending import clock_decimals
 
     def quarter_steps(rec):
         view = episode_view(rec)
         return dataclasses.replace(view, times=view.steps * 0.25, dt=0.25)
 
-    monkeypatch.setattr(plots, "episode_view", quarter_steps)
-    _, draw, _ = plots.animation_figure(read_recording(runs[0].path))
+    monkeypatch.setattr(animation, "episode_view", quarter_steps)
+    _, draw, _ = animation.animation_figure(read_recording(runs[0].path))
     assert [draw(row)[-1].get_text() for row in (1, 3, 5)] == [
         f"t = {t} s of 2.00 s" for t in ("0.25", "0.75", "1.25")
     ]

@@ -108,7 +108,8 @@ def test_a_controller_behind_a_sensor_records_its_predictions_of_the_humans_in_v
     # each robot at each snapshot of the plot, following the robots in the animation
     from matplotlib.patches import Circle
 
-    from pipelines.logs.plots import animation_figure, recording_figure, sensor_radius
+    from pipelines.logs.animation import animation_figure
+    from pipelines.logs.plots import recording_figure, sensor_radius
 
     assert sensor_radius(rec) == 3.0
     fig, drawn = recording_figure(rec)

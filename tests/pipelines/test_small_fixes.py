@@ -18,7 +18,7 @@ from pipelines.experiments.cells import get_experiment
 from pipelines.experiments.report import STALE_STAGING_S, write_report
 from pipelines.experiments.report_plots import OUTCOMES, outcome_figure
 from pipelines.experiments.summary import summarize as summarize_cells
-from pipelines.logs.plots import animation_figure
+from pipelines.logs.animation import animation_figure
 from pipelines.logs.reader import read_recording
 from pipelines.logs.review import summarize
 from pipelines.logs.schema_check import check_recording
