@@ -55,7 +55,8 @@ class Run:
         import torch
 
         from predictors.data.datamodule import TrajnetDataModule
-        from predictors.training import OptimConfig, make_module
+        from predictors.optim_config import OptimConfig
+        from predictors.training import make_module
 
         size, seed = args.batch_size, args.seed
         data = TrajnetDataModule(files, files, [], batch_size=size, seed=seed, batching=batching)

@@ -8,6 +8,8 @@ neighbours teacher-forced and only the primary fed its own (detached) prediction
 predicted displacements. Validation and test predict every agent recursively, as ``crowdmpc evaluate`` does,
 and log the primary's ADE/FDE (``val_ade`` selects the best checkpoint).
 
+Their optimiser's settings are ``OptimConfig`` (``predictors.optim_config``, exported here too).
+
 The GAN (``GANModule``) optimises by hand (``automatic_optimization = False``): a generator step on the
 variety (best-of-k) loss plus the adversarial loss, then a discriminator step on real vs generated
 trajectories.
@@ -15,11 +17,9 @@ trajectories.
 
 from __future__ import annotations
 
-import math
-import numbers
 import time
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from typing import TYPE_CHECKING, Any, cast
 
 import lightning as L
@@ -37,54 +37,15 @@ from predictors.nets.contract import (
     check_trainable,
     check_training_forward,
 )
-from predictors.nets.losses import VARIETY_ERRORS, gaussian_nll, l2_loss, variety_loss
+from predictors.nets.losses import gaussian_nll, l2_loss, variety_loss
 from predictors.nets.rollout import teacher_forced_rollout
 from predictors.nets.social_gan import Discriminator, DiscriminatorConfig
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+from predictors.optim_config import OptimConfig
 
 if TYPE_CHECKING:
     from lightning.pytorch.core.optimizer import LightningOptimizer
     from torch.optim.lr_scheduler import LRScheduler
-
-LOSSES = ("gaussian", "l2")
-
-
-@dataclass(frozen=True)
-class OptimConfig:
-    lr: float = 1e-3  # Adam learning rate [TrajNet++ 1e-3]
-    weight_decay: float = 1e-4  # [TrajNet++ 1e-4]
-    step_size: int = 10  # epochs between learning-rate decays by gamma [TrajNet++ 10]
-    gamma: float = 0.1  # [torch StepLR default, as TrajNet++]
-    loss: str = "gaussian"  # "gaussian" (TrajNet++ "pred") | "l2"; the GAN always uses variety + adversarial
-    variety_k: int = 6  # GAN: samples per scene for the best-of-k loss [Social GAN: 20]
-    adversarial_weight: float = 0.1  # GAN: weight of the generator's adversarial loss
-    top_k: int = 20  # GAN: samples for the validation top-k ADE/FDE
-    # GAN: what the best-of-k loss picks and penalises per scene (nets.losses.variety_loss): "distance", the
-    # sample's mean Euclidean error (every shipped GAN), or "squared", its mean squared error [Social GAN]
-    variety_error: str = "distance"
-
-    def __post_init__(self):
-        for key, value in asdict(self).items():  # "1e-3" from a YAML file met a bare TypeError below
-            if key in ("loss", "variety_error"):
-                continue
-            whole = key in ("step_size", "variety_k", "top_k")
-            # numpy's scalars (a sweep's np.arange steps) as the nets' configs take them
-            if isinstance(value, bool) or not isinstance(value, numbers.Integral if whole else numbers.Real):
-                raise PredictorError(f"{key} must be {'an int' if whole else 'a number'}, got {value!r}")
-            if not math.isfinite(value):
-                raise PredictorError(f"{key} must be finite, got {value!r}")
-        if self.loss not in LOSSES:
-            raise PredictorError(f"loss {self.loss!r} is not one of {list(LOSSES)}")
-        if self.variety_error not in VARIETY_ERRORS:
-            raise PredictorError(f"variety_error {self.variety_error!r} is not one of {list(VARIETY_ERRORS)}")
-        if self.lr <= 0 or self.weight_decay < 0 or self.step_size < 1 or not 0 < self.gamma <= 1:
-            raise PredictorError(
-                f"need lr > 0, weight_decay >= 0, step_size >= 1 and 0 < gamma <= 1, got {asdict(self)}"
-            )
-        if self.variety_k < 1 or self.top_k < 1 or self.adversarial_weight < 0:
-            raise PredictorError(
-                f"need variety_k >= 1, top_k >= 1 and adversarial_weight >= 0, got {asdict(self)}"
-            )
 
 
 def primary_targets(batch: SceneBatch) -> tuple[torch.Tensor, torch.Tensor]:

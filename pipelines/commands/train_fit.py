@@ -34,7 +34,7 @@ def run_training(
     and test files' scenes as the evaluation reads them, by path (read by ``train_data.check_data``)."""
     from pipelines.commands.train_report import print_summary
     from predictors.models import model_kind
-    from predictors.training import OptimConfig
+    from predictors.optim_config import OptimConfig
 
     optim = OptimConfig(
         lr=args.lr, step_size=args.step_size, loss=args.loss, variety_error=args.variety_error

@@ -30,7 +30,7 @@ _PATH_KEYS = ("best_model_path", "last_model_path", "kth_best_model_path")
 # The best checkpoints' names: Lightning writes "{epoch:03d}" as epoch=001 (train_fit's callback).
 BEST_FILENAME = "best-{epoch:03d}-{val_ade:.4f}"
 BEST_PREFIX = "best-epoch="
-_LOSSES = ("gaussian", "l2")  # predictors.training.LOSSES, without importing Lightning
+_LOSSES = ("gaussian", "l2")  # predictors.optim_config.LOSSES, without importing torch
 LOCK_FILE = ".train.lock"
 # What a resume names by a noun alone (say_taken), rather than as an option and its value
 _NOUNS: Final[tuple[str, ...]] = ("net config", "data files")

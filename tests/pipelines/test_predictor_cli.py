@@ -604,7 +604,8 @@ def test_the_recorded_loss_is_the_one_trained(trained):
     out, _ = trained
     assert json.loads((out / "walker.json").read_text())["training"]["optim"]["loss"] == "gaussian"
     from pipelines.commands.train_report import trained_loss
-    from predictors.training import OptimConfig, make_module
+    from predictors.optim_config import OptimConfig
+    from predictors.training import make_module
 
     point = make_module("social_lstm", {"head": "point"}, OptimConfig())
     assert trained_loss(point, "gaussian") == "l2"

@@ -17,7 +17,8 @@ from predictors.checkpoint import load_checkpoint, save_checkpoint
 from predictors.errors import PredictorError
 from predictors.models import load_plugin, model_kind, model_kinds
 from predictors.nets.contract import check_step_contract, check_training_forward
-from predictors.training import OptimConfig, PredictorModule, defines_forward, make_module
+from predictors.optim_config import OptimConfig
+from predictors.training import PredictorModule, defines_forward, make_module
 from tests.predictors.samples import write_walk_file
 
 BROKEN = "tests.plugins.broken_nets"

@@ -10,7 +10,8 @@ import torch
 from pipelines.commands.train_resume import checkpoint_settings
 from predictors.data.datamodule import TrajnetDataModule
 from predictors.nets.social_gan import generator_config
-from predictors.training import GANModule, OptimConfig, PredictorModule, make_module
+from predictors.optim_config import OptimConfig
+from predictors.training import GANModule, PredictorModule, make_module
 from tests.predictors.samples import write_walk_file
 
 

@@ -20,9 +20,9 @@ from predictors.nets.social_attention import SocialAttention
 from predictors.nets.social_gan import generator_config
 from predictors.nets.social_gru import SocialGRU, SocialGRUConfig
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+from predictors.optim_config import OptimConfig
 from predictors.training import (
     GANModule,
-    OptimConfig,
     PredictorModule,
     SocialLSTMModule,
     defines_forward,
@@ -332,3 +332,11 @@ def test_the_gan_trains_on_the_variety_error_of_its_config(error):
     assert out["variety"].item() == pytest.approx(expected.item(), rel=1e-6)
     other = variety_loss(samples, truth, valid, "squared" if error == "distance" else "distance")
     assert out["variety"].item() != pytest.approx(other.item(), rel=1e-3)
+
+
+def test_optim_config_stays_importable_from_training():
+    """OptimConfig lived in predictors.training before predictors.optim_config: code written then (and
+    docs/extending.md's example) still imports it from there."""
+    from predictors import optim_config, training
+
+    assert training.OptimConfig is optim_config.OptimConfig
