@@ -103,7 +103,8 @@ def _episodes(block: Calibration, made: dict[str, str]) -> str:
         seeds = [int(made["seed"]), int(made["seed"]) + int(made["episodes"]) - 1]
     if not isinstance(seeds, list) or not seeds:
         return made["episodes"]
-    return f"{made['episodes']} ({seeds[0]}..{seeds[-1]})"
+    span = f"{seeds[0]}" if seeds[0] == seeds[-1] else f"{seeds[0]}..{seeds[-1]}"  # not "1 (7..7)"
+    return f"{made['episodes']} ({span})"
 
 
 def _view(block: Calibration) -> str:

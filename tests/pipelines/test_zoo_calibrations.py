@@ -122,3 +122,14 @@ def test_a_user_zoo_set_to_the_shipped_one_lists_its_blocks(monkeypatch, capsys)
     out = capsys.readouterr().out.splitlines()
     assert len(out) == 2 + 10 + 1 and all(line.endswith(" shipped") for line in out[2:-1])
     assert sorted(p.name for p in zoo.checkpoints_dir().iterdir()) == before
+
+
+def test_a_block_of_one_episode_lists_its_seed_once():
+    """A block made on one closed-loop episode was listed "1 (7..7)"; a range is said of two seeds or more."""
+    from pipelines.commands.zoo_calibrations import _episodes
+
+    shipped = find_calibration("social_lstm_eth", "closed-loop", 0.1)
+    one = dataclasses.replace(shipped, details={**shipped.details, "seeds": [7]})
+    two = dataclasses.replace(shipped, details={**shipped.details, "seeds": [7, 8]})
+    assert _episodes(one, {"episodes": "1"}) == "1 (7)"
+    assert _episodes(two, {"episodes": "2"}) == "2 (7..8)"
