@@ -177,12 +177,32 @@ def require_parity(predictor: Exported, n_humans: int, n_robots: int, horizon: i
             net = getattr(predictor, "net", None)
             detached = DETACHED.get(net) if net is not None else None
             raise ExportError(_derivatives_differ(parity, detached), predictor.name)
+        drift = _torch_drift(predictor, n_humans, n_robots, horizon)
+        if drift > PARITY_TOLERANCE:  # no export can match a net that is not one function of its inputs
+            raise ExportError(
+                f"torch's prediction is not deterministic: two rollouts of the same scene differ by "
+                f"{drift:.2e}, and an exported function is one fixed draw of it; a net must predict the same "
+                "steps from the same past (draw random numbers, by random, numpy or torch.rand*, only while "
+                "training: if self.training)",
+                predictor.name,
+            )
         raise ExportError(
             f"the exported prediction differs from torch by {parity.value_error:.2e} (values) and "
             f"{parity.jacobian_error:.2e} (Jacobians), more than {PARITY_TOLERANCE:g}",
             predictor.name,
         )
     return parity
+
+
+def _torch_drift(predictor: Exported, n_humans: int, n_robots: int, horizon: int) -> float:
+    """The largest difference of two torch rollouts of the parity's first scene: not 0 for a net that draws
+    a random number as it predicts, whose export (traced once: the draw a constant) then "differed from
+    torch" as if the exporter were wrong. Run only once parity failed, so a passing export costs nothing."""
+    history, mask, humans, future = crossing_scene(n_humans, n_robots, horizon, predictor.obs_len, 0)
+    plan = torch.from_numpy(future.copy())
+    with single_threaded(), torch.no_grad():
+        first, second = (predictor.rollout_tensor(history, mask, plan, humans).numpy() for _ in range(2))
+    return float(np.nan_to_num(np.abs(first - second), nan=np.inf).max(initial=0.0))
 
 
 def _derivatives_differ(parity: Parity, detached: str | None) -> str:

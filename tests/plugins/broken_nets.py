@@ -4,6 +4,7 @@ loading from a zoo and the closed loop refuse each in one line."""
 
 from __future__ import annotations
 
+import random
 from dataclasses import dataclass
 
 import torch
@@ -270,3 +271,12 @@ class NaNWhenEvaluated(ToyNet):
     def decode_step(self, h, prev, cur, neighbours):
         h, out = super().decode_step(h, prev, cur, neighbours)
         return h, out if self.training else out * float("nan")
+
+
+class DrawsInPython(ToyNet):
+    """Adds a draw of Python's ``random`` to each step: a constant to the exporter, which traces the net once,
+    and another number at each torch rollout."""
+
+    def decode_step(self, h, prev, cur, neighbours):
+        h, out = super().decode_step(h, prev, cur, neighbours)
+        return h, out + 0.01 * random.random()

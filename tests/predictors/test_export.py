@@ -774,3 +774,21 @@ def test_jacobians_that_differ_where_values_agree_name_the_stopped_gradient(net,
     assert "but its Jacobians with respect to the robots' plan differ by" in message and "\n" not in message
     if net == "VelocityWithoutGradients":
         assert "a detach(), a torch.no_grad() block or a straight-through trick" in message
+
+
+def test_a_net_that_draws_random_numbers_is_refused_as_not_deterministic():
+    """A net adding Python's random.random() to its steps was refused with "the exported prediction differs
+    from torch by 6.53e-03 (values)", which sent its author looking for an exporter bug: the export holds
+    one draw, each torch rollout another."""
+    from predictors.learned import LearnedPredictor
+    from tests.plugins.broken_nets import DrawsInPython
+    from tests.plugins.toy_predictor import ToyConfig
+
+    predictor = LearnedPredictor(DrawsInPython(ToyConfig()), name="draws")
+    with pytest.raises(ExportError) as refused:
+        predictor.to_casadi(2, 1, 3)
+    message = str(refused.value)
+    assert message.startswith(
+        "cannot export: torch's prediction is not deterministic: two rollouts of the same scene differ by "
+    ), message
+    assert "only while training" in message and "(in module 'draws')" in message and "\n" not in message
