@@ -252,6 +252,19 @@ def _check_finite(out: torch.Tensor, where: str, what: str, agents: int) -> None
         )
 
 
+def _check_same(out: torch.Tensor, again: torch.Tensor, where: str, method: str) -> None:
+    """A net that draws a random number as it predicts (``torch.randn_like``, Python's ``random``) was added
+    to a zoo, and evaluate and calibrate scored another draw at each run without a word; the closed loop
+    planned with it in torch, since its export is refused."""
+    if not torch.equal(out, again):
+        drift = float((out - again).abs().max())
+        raise PredictorError(
+            f"{where}: {method} is not deterministic: two calls on the same synthetic batch gave outs "
+            f"{drift:.2e} apart; a predictor must predict the same steps from the same past (draw random "
+            f"numbers only while training: if self.training) {SEE}"
+        )
+
+
 def _check_steps(
     net: torch.nn.Module, where: str, obs_len: int, head: str, agents: int, finite: bool = False
 ) -> None:
@@ -275,6 +288,10 @@ def _check_steps(
         if finite:
             _check_finite(out, where, "encode's out", agents)
             _check_finite(new_out, where, "decode_step's out", agents)
+            again = _split(step_net.encode(positions, mask), where, "encode", agents)
+            _check_same(out, again[1], where, "encode")
+            stepped = step_net.decode_step(*state, *inputs)  # inputs unchanged: _unchanged checked them
+            _check_same(new_out, _split(stepped, where, "decode_step", agents)[1], where, "decode_step")
     before = [(tuple(t.shape), t.dtype) for t in state]
     after = [(tuple(t.shape), t.dtype) for t in new_state]
     if before != after:

@@ -280,3 +280,11 @@ class DrawsInPython(ToyNet):
     def decode_step(self, h, prev, cur, neighbours):
         h, out = super().decode_step(h, prev, cur, neighbours)
         return h, out + 0.01 * random.random()
+
+
+class NoisySteps(ToyNet):
+    """Adds torch's noise to each step, in eval mode too: another prediction at each call."""
+
+    def decode_step(self, h, prev, cur, neighbours):
+        h, out = super().decode_step(h, prev, cur, neighbours)
+        return h, out + 0.01 * torch.randn_like(out)

@@ -336,3 +336,25 @@ def test_a_predictor_whose_net_predicts_nan_for_observed_agents_is_refused_where
     )
     assert message.startswith(expected) and "\n" not in message, message
     assert LearnedPredictor(ToyNet(ToyConfig()), name="toy").name == "toy"
+
+
+@pytest.mark.parametrize("net", ["NoisySteps", "DrawsInPython"])
+def test_a_predictor_whose_net_draws_random_numbers_is_refused_where_it_loads(net):
+    """A plugin net adding noise to its steps in eval mode was added to a zoo, and `crowdmpc evaluate`
+    scored it 4.305 / 7.405 m, then 4.306 / 7.406 m, without a word; the MPC, refused its export, planned
+    with it in torch. Training keeps such a net (its noise may be wanted there). The toy net encodes by its
+    decode_step, so encode is the call named."""
+    import tests.plugins.broken_nets as broken
+    from predictors.learned import LearnedPredictor
+    from tests.plugins.toy_predictor import ToyConfig
+
+    model = getattr(broken, net)(ToyConfig())
+    check_step_contract(model, "model 'x'", obs_len=OBS_LEN)  # its shapes keep the contract
+    with pytest.raises(PredictorError) as caught:
+        LearnedPredictor(model, name="noisy", kind=f"{BROKEN}:{net}")
+    message = str(caught.value)
+    expected = (
+        f"predictor 'noisy' (model '{BROKEN}:{net}'): encode is not deterministic: two calls on the "
+        "same synthetic batch gave outs "
+    )
+    assert message.startswith(expected) and "only while training" in message and "\n" not in message

@@ -776,11 +776,15 @@ def test_jacobians_that_differ_where_values_agree_name_the_stopped_gradient(net,
         assert "a detach(), a torch.no_grad() block or a straight-through trick" in message
 
 
-def test_a_net_that_draws_random_numbers_is_refused_as_not_deterministic():
+def test_a_net_that_draws_random_numbers_is_refused_as_not_deterministic(monkeypatch):
     """A net adding Python's random.random() to its steps was refused with "the exported prediction differs
     from torch by 6.53e-03 (values)", which sent its author looking for an exporter bug: the export holds
-    one draw, each torch rollout another."""
+    one draw, each torch rollout another. (Such a net is refused as it loads, on the contract's synthetic
+    batch: the load check is left out here, as for a net whose draws that batch does not meet.)"""
+    import predictors.learned
     from predictors.learned import LearnedPredictor
+
+    monkeypatch.setattr(predictors.learned, "check_predictor_contract", lambda *args, **kwargs: None)
     from tests.plugins.broken_nets import DrawsInPython
     from tests.plugins.toy_predictor import ToyConfig
 
