@@ -250,8 +250,12 @@ def _add(args: argparse.Namespace) -> int:
         raise PipelineError(
             f"{metrics_path}: more than the {checkpoint.MAX_DOCUMENT_BYTES} bytes a metrics file may have"
         )
-    try:
-        summary = json.loads(metrics_path.read_text(encoding="utf-8"))
+    from predictors.errors import DuplicateKey, unique_keys
+
+    try:  # a key given twice is refused, as in every JSON file a user edits
+        summary = json.loads(metrics_path.read_text(encoding="utf-8"), object_pairs_hook=unique_keys)
+    except DuplicateKey as exc:
+        raise PipelineError(f"{metrics_path}: {exc}; give each key once (json would keep the last)") from None
     except (ValueError, RecursionError) as exc:  # JSONDecodeError, not UTF-8, nested too deeply
         raise PipelineError(f"{metrics_path}: not valid JSON ({exc})") from None
     if not isinstance(summary, dict):

@@ -604,6 +604,21 @@ def test_zoo_add_refuses_a_bad_metrics_file_before_writing(tmp_path, zoo_dir, pa
     assert tree(tmp_path) == before
 
 
+def test_zoo_add_refuses_a_metrics_file_that_names_a_key_twice(tmp_path, zoo_dir, pair, capsys):
+    """json kept the last of a key given twice: a metrics file edited to '"protocol": "paper"' above the
+    one there added the entry as the other, where every other JSON file a user edits is refused so."""
+    metrics = pair[0].with_suffix(".metrics.json")
+    metrics.write_text('{"protocol": "paper", "protocol": "custom"}')
+    before = tree(tmp_path)
+    code, line = cli(["zoo", "add", str(pair[0])], capsys)
+    assert (code, line) == (
+        2,
+        f"crowdmpc zoo add: error: {metrics}: the key 'protocol' appears twice in one object; give each key "
+        "once (json would keep the last)",
+    )
+    assert tree(tmp_path) == before
+
+
 @pytest.mark.parametrize("where", ["/dev/zero", "folder"])
 def test_zoo_add_names_a_metrics_path_that_is_no_file_as_such(tmp_path, zoo_dir, pair, capsys, where):
     """`--metrics /dev/zero` (or a folder) was refused as "does not exist", which it does."""
