@@ -67,3 +67,20 @@ def sigint_as_at_a_terminal():
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     yield
     signal.signal(signal.SIGINT, previous)
+
+
+@pytest.fixture(autouse=True)
+def _lightning_logs_to_this_tests_stderr():
+    """Lightning's loggers print through a StreamHandler made as lightning is imported, on the sys.stderr of
+    that moment: a test under capsys that imported it first left them writing to a closed capture, so that a
+    later test's Lightning message came out as "--- Logging error --- Traceback ..." (test_train_storage's
+    check of no traceback failed after test_train_output, run alone as a pair). Each test's handlers write
+    to its own sys.stderr."""
+    import logging
+    import sys
+
+    for name in ("lightning", "lightning.pytorch", "lightning.fabric"):
+        if name in logging.Logger.manager.loggerDict:  # not imported: nothing to repoint (and no import)
+            for handler in logging.getLogger(name).handlers:
+                if type(handler) is logging.StreamHandler:
+                    handler.stream = sys.stderr  # not setStream, which flushes the closed one first
