@@ -242,8 +242,10 @@ def planned_margins(
         name = spec.predictor_name
         predictor = loaded.get(name) if name is not None else None
         entry = None if entries is None else entries.get(name or "")
-        # a model that did not load (read_predictors): its entry's, as the notes read it
-        unloaded = checkpoint_sha256(name) if entry is None else entry.sha256
+        # a model that did not load (read_predictors): its entry's, as the notes read it; a zoo name not in
+        # ``entries`` is in no zoo (read_predictors located every one): no manifest read again for it
+        located = checkpoint_sha256(name) if entries is None else None
+        unloaded = located if entry is None else entry.sha256
         sha256 = loaded_sha256(predictor) if predictor is not None else unloaded
         horizon = mpc_config(spec).horizon
         world = experiment.method_worlds.get(label, experiment.world)

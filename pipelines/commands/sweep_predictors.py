@@ -26,8 +26,9 @@ class PlanModels(NamedTuple):
     # the calibration block each method plans with, by label, or its refusal (``planned_margins``'), None:
     # not looked up yet
     blocks: dict[str, Planned] | None = None
-    # ``read_predictors``: the refusal of a model that does not load (the first, in name order: the others
-    # are not loaded), which ``check_predictors`` raises; ``loaded`` then holds the models before it
+    # ``read_predictors``: the refusal of predictors no zoo holds (``loaded`` then empty) or of a model that
+    # does not load (the first, in name order: the others are not loaded; ``loaded`` then holds the models
+    # before it), which ``check_predictors`` raises
     refused: PipelineError | PredictorError | None = None
 
 
@@ -47,11 +48,12 @@ def check_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None
 
 
 def read_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None = None) -> PlanModels:
-    """``check_predictors``' reads, a model whose kind is not registered or that does not load kept as
-    ``refused`` (the other refusals raised) with the entries of every zoo predictor the plan names, so that
-    the notes printed before that refusal describe the entries located here: they located each again and
-    looked each method's calibration block up once a note, so a corrupt social_lstm_eth.pt had Table II's
-    `sweep --margins conformal:0.1 --dry-run` read manifest.json 12 times and calibrations.json 10 times."""
+    """``check_predictors``' reads, a name no zoo holds, a model whose kind is not registered or that does
+    not load kept as ``refused`` (the other refusals, of a damaged manifest, raised) with the entries of
+    every zoo predictor the plan names, so that the notes printed before that refusal describe the entries
+    located here: they located each again and looked each method's calibration block up once a note, so a
+    corrupt social_lstm_eth.pt had Table II's `sweep --margins conformal:0.1 --dry-run` read manifest.json
+    12 times and calibrations.json 10 times (an unknown name: twice, 22 times with those margins)."""
     from predictors import zoo
     from predictors.errors import PredictorError
     from predictors.models import model_kind
@@ -69,17 +71,20 @@ def read_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None 
         entries.setdefault(located.entry.name, located)
     known = set(PREDICTORS) | set(entries)
     missing = sorted(wanted - known)
+    # the entries of the names some zoo holds: the notes printed before a refusal read these, where they
+    # located each name again (the manifest read twice before `sweep --predictor nope` refused)
+    found = {name: entries[name].entry for name in sorted(wanted & set(entries) - set(PREDICTORS))}
     if missing:
         where = next((chosen_by[name] for name in missing if name in chosen_by), None)
         option = "--predictors" if experiment.predictor_list else "--predictor"
         hint = f"check the names {option} gives, or " if where is None else ""
-        raise PipelineError(
+        refused = PipelineError(
             f"{'' if where is None else f'{where}: '}experiment {experiment.name!r} needs predictors "
             f"{missing} that are not available; available: {sorted(known)} ({hint}train or fetch the zoo "
             "models)"
         )
-    names = sorted(wanted - set(PREDICTORS))
-    found = {name: entries[name].entry for name in names}
+        return PlanModels({}, found, refused=refused)  # nothing loaded: the plan stops at its notes
+    names = sorted(found)
     loaded: dict[str, Predictor] = {}
     for name in names:
         located = entries[name]

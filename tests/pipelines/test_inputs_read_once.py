@@ -371,3 +371,21 @@ def test_a_sweep_whose_predictor_does_not_load_reads_each_input_once(tmp_path, m
     assert error.startswith(f"crowdmpc sweep: error: checkpoint {shipped / name}.pt has sha256 ")
     read = {path.name: n for path, n in opened.items() if path.parent == shipped}
     assert read == {"manifest.json": 1, f"{name}.json": 1, f"{name}.pt": 1, "calibrations.json": 1}
+
+
+def test_a_sweep_of_a_predictor_no_zoo_holds_reads_the_manifest_once(tmp_path, monkeypatch, capsys):
+    """The notes printed before the refusal of a name no zoo holds located each name again: `sweep
+    --experiment table2 --predictor nope --dry-run` read the manifest twice (22 times, and calibrations.json
+    10 times, with --margins conformal:0.1). Its one line is as it was."""
+    from pipelines.cli import main
+    from predictors import zoo
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    shipped = zoo.checkpoints_dir().resolve()
+    opened = count_opens(monkeypatch, ".json")
+    plan = ["--experiment", "table2", "--predictor", "nope", "--margins", "conformal:0.1", "--dry-run"]
+    assert main(["sweep", *plan, "--out", str(tmp_path / "s")]) == 2
+    error = capsys.readouterr().err.splitlines()[-1]
+    assert error.startswith("crowdmpc sweep: error: experiment 'table2' needs predictors ['nope'] that are")
+    assert error.endswith("(check the names --predictor gives, or train or fetch the zoo models)")
+    assert opened[shipped / "manifest.json"] == 1 and opened[shipped / "calibrations.json"] <= 1
