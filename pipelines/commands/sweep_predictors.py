@@ -34,7 +34,8 @@ class PlanModels(NamedTuple):
 
 def check_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None = None) -> PlanModels:
     """Fail before starting workers, not once per episode in errors.jsonl: every predictor is registered or
-    in a zoo, a zoo model's kind is registered (a plugin's, with --plugin, which the workers inherit), and it
+    in a zoo, a zoo model's kind is registered (a plugin's, with --plugin, which the workers inherit; its
+    config's, which builds it, not its manifest entry's, which `zoo verify` checks against it), and it
     loads as simulate loads it (its files' sha256 as its manifest records them, its net's contract), each
     refusal simulate's one line. ``chosen_by``: a predictor's name -> where the run chose it ("run.toml:
     controller.predictor", "--predictors"), which its refusal names first. Returns the zoo models loaded,
@@ -90,12 +91,12 @@ def read_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None 
         located = entries[name]
         where = f"{chosen_by[name]}: " if name in chosen_by else ""
         try:
-            model_kind(located.entry.model)
-        except PredictorError as exc:
-            refused = PipelineError(f"{where}predictor {name!r} of the {located.source} zoo: {exc}")
-            return PlanModels(loaded, found, refused=refused)
-        try:
             loaded[name] = zoo.load_located(located)  # what every worker would do first, and fail at
         except (PipelineError, PredictorError) as exc:
+            try:  # a kind no plugin registers is said as the entry's (the config's, if it loaded, built it)
+                model_kind(located.entry.model)
+            except PredictorError as unknown:
+                refused = PipelineError(f"{where}predictor {name!r} of the {located.source} zoo: {unknown}")
+                return PlanModels(loaded, found, refused=refused)
             return PlanModels(loaded, found, refused=PipelineError(f"{where}{exc}") if where else exc)
     return PlanModels(loaded, found)

@@ -458,3 +458,47 @@ def test_a_stray_file_named_as_crowdmpcs_own_package_beside_a_plugin_shadows_not
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["my_plugin_q", "True", "pipelines.cli"]
+
+
+def test_a_manifest_entry_naming_a_kind_no_plugin_registers_runs_as_its_config_says(
+    tmp_path, monkeypatch, capsys
+):
+    """The config, whose sha256 the entry holds, builds the model (`zoo verify` names an entry that says
+    otherwise): simulate ran a user entry whose manifest "model" was edited to a kind nothing registers,
+    while the sweep refused it, "predictor 'mine' of the user zoo: unknown model 'no_such_kind'"."""
+    import hashlib
+    import shutil
+
+    from predictors import zoo
+
+    src = tmp_path / "src"
+    src.mkdir()
+    for suffix in (".pt", ".json"):
+        shutil.copyfile(zoo.shipped_checkpoints_dir() / f"social_lstm_eth{suffix}", src / f"mine{suffix}")
+    sha = {
+        suffix: hashlib.sha256((src / f"mine{suffix}").read_bytes()).hexdigest()
+        for suffix in (".pt", ".json")
+    }
+    recorded = {"weights_sha256": sha[".pt"], "config_sha256": sha[".json"], "model": "social_lstm"}
+    (src / "mine.metrics.json").write_text(json.dumps({**recorded, "metrics": {}}))
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    monkeypatch.chdir(tmp_path)
+    assert main(["zoo", "add", str(src / "mine.pt")]) == 0
+    manifest = tmp_path / "zoo" / zoo.MANIFEST_NAME
+    document = json.loads(manifest.read_text())
+    document["models"][0]["model"] = "no_such_kind"
+    manifest.write_text(json.dumps(document))
+    small = ["--predictor", "mine", "--humans", "2", "--robots", "1", "--episodes", "1"]
+    code, _, err = run(
+        capsys, "simulate", "--controller", "cmpc", *small, "--no-progress", "--set", "env.time_limit=2"
+    )
+    assert code == 0, err
+    code, _, err = run(
+        capsys, "sweep", "--experiment", "table2", *small, "--dry-run", "--out", str(tmp_path / "s")
+    )
+    assert code == 0, err
+    [problem] = [problem for located, problem in zoo.verify_entries() if located.entry.name == "mine"]
+    assert (
+        problem is not None
+        and "entry 'mine' says model 'no_such_kind', its config mine.json 'social_lstm'" in problem
+    )
