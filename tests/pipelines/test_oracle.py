@@ -172,6 +172,6 @@ def test_reset_builds_everything_the_first_step_needs(controller, monkeypatch):
         raise AssertionError("built inside the first step")
 
     monkeypatch.setattr("mpc.solvers.build_nlpsol", no_build)
-    monkeypatch.setattr("predictors.learned.export_function", no_build)
+    monkeypatch.setattr("predictors.learned_casadi.export_function", no_build)
     out = controller_.act(obs)
     assert out.status == "ok" and out.fallback is None

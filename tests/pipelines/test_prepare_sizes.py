@@ -3,7 +3,7 @@
 import pytest
 
 import mpc.solvers
-import predictors.learned
+import predictors.learned_casadi
 from crowdsim.env import CrowdEnv
 from mpc.config import MPCConfig
 from mpc.nlp import JointNLP, LocalNLP
@@ -22,7 +22,7 @@ def test_a_prepared_size_builds_nothing_in_the_loop_and_another_size_does(name, 
     assert list(seconds) == [(3, 4), (3, 2)] and all(s > 0 for s in seconds.values())
     # the NLPs' solvers, the predictor's twin and its encoder are all built through these two
     monkeypatch.setattr(mpc.solvers, "build_nlpsol", _no_build)
-    monkeypatch.setattr(predictors.learned, "export_function", _no_build)
+    monkeypatch.setattr(predictors.learned_casadi, "export_function", _no_build)
     env = CrowdEnv()
     for n_humans in (2, 4):  # people come and go
         obs = env.reset(0, "circle", n_humans, 3)
