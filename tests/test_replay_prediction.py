@@ -92,16 +92,21 @@ def test_it_prints_every_group_for_each_predictor(monkeypatch, capsys):
 def test_the_orca_oracle_is_refused_in_one_line_before_the_recording_is_read(monkeypatch, capsys):
     # it reads the simulator's state: the table's header came first, then its API's "call observe(obs)"
     argv = ["replay_prediction.py", "--predictors", "constant_velocity", "orca_oracle"]
+    assert _refusal(monkeypatch, capsys, argv) == (
+        "replay_prediction.py: error: argument --predictors: orca_oracle predicts the simulator's humans "
+        "from its ORCA state, not a recording's people: name a predictor that reads positions"
+    )
+
+
+def _refusal(monkeypatch, capsys, argv: list[str]) -> str:
+    """The one line ``argv`` is refused with (exit 2), nothing on standard output."""
     monkeypatch.setattr(sys, "argv", argv)
     with pytest.raises(SystemExit) as exit_:
         replay_prediction.main()
     assert exit_.value.code == 2
     out, err = capsys.readouterr()
     assert out == ""
-    assert err.splitlines()[-1] == (
-        "replay_prediction.py: error: argument --predictors: orca_oracle predicts the simulator's humans "
-        "from its ORCA state, not a recording's people: name a predictor that reads positions"
-    )
+    return err.splitlines()[-1]
 
 
 def test_a_predictor_named_twice_is_refused_before_the_recording_is_read(monkeypatch, capsys):
@@ -114,12 +119,6 @@ def test_a_predictor_named_twice_is_refused_before_the_recording_is_read(monkeyp
         "social_lstm_eth",
         "constant_velocity",
     ]
-    monkeypatch.setattr(sys, "argv", argv)
-    with pytest.raises(SystemExit) as exit_:
-        replay_prediction.main()
-    assert exit_.value.code == 2
-    out, err = capsys.readouterr()
-    assert out == ""
-    assert err.splitlines()[-1] == (
+    assert _refusal(monkeypatch, capsys, argv) == (
         "replay_prediction.py: error: --predictors names constant_velocity more than once"
     )
