@@ -333,14 +333,16 @@ def locate_calibration(
     sensor_range: float | None = None,
     sensor_tracks: bool = True,
     kind: ModelKind = ...,
+    stored: Sequence[tuple[Path, Calibration]] | None = None,
 ) -> tuple[Path, Calibration]:
     """``(file, block)``: the block ``find_calibration`` gives and the calibrations file holding it, which
     tells a user's block from a shipped one (``calibration_zoo``). ``kind``: as ``recalibrate_command``
-    takes it, for the command a refusal quotes."""
+    takes it, for the command a refusal quotes. ``stored``: ``stored_calibrations(directory)`` as a caller
+    read it once for several lookups (None: read here)."""
     check_alpha(alpha)
     if source not in SOURCES:
         raise PredictorError(f"unknown calibration source {source!r}; choose from {list(SOURCES)}")
-    stored = stored_calibrations(directory)
+    stored = stored_calibrations(directory) if stored is None else stored
     wanted = (sensor_range, sensor_tracks)
     found = [(path, b) for path, b in stored if b.matches(predictor, source, alpha)]
     if not found:

@@ -22,7 +22,7 @@ from pipelines.commands.sweep_predictors import PlanModels, check_predictors, re
 from pipelines.commands.team_notes import flock_note, goal_room_note, separate_goals_note
 from pipelines.config.schema import MPC_FROM_WORLD
 from pipelines.errors import PipelineError
-from pipelines.loop.margins_read import Refused, block_of, look_up
+from pipelines.loop.margins_read import Refused, block_of, look_up, read_once
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Mapping
@@ -236,6 +236,7 @@ def planned_margins(
     from predictors.registry import checkpoint_sha256, loaded_sha256
 
     loaded = loaded or {}
+    in_force = read_once()  # every method's block from one read of the calibrations, not one a predictor
     blocks: dict[tuple[Any, ...], Planned] = {}  # Table II's CMPC and DMPC plan with one block: read once
     planned: dict[str, Planned] = {}
     for label, spec in experiment.methods:
@@ -253,7 +254,7 @@ def planned_margins(
         kind = ... if entries is None else None if entry is None else entry.model
         key = (margins, name, horizon, sha256)
         if key not in blocks:  # the calibrations read once, as the controller does
-            blocks[key] = look_up(margins, name, horizon, sha256, kind)
+            blocks[key] = look_up(margins, name, horizon, sha256, kind, in_force)
         at = blocks[key]
         if not isinstance(at, Refused):
             try:

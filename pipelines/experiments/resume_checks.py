@@ -18,7 +18,7 @@ from pipelines.experiments.tasks import Cell, EpisodeTask
 from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
-    from pipelines.loop.margins import MarginSpec
+    from pipelines.loop.margins import InForce, MarginSpec
 
 
 def read_recorded(
@@ -142,12 +142,15 @@ class ResumeChecks:
         recalibration under the same alpha and source keeps the cell key): its table would silently mix two
         margin sets. Records without margins (baselines, records from before the config was kept) say
         nothing."""
+        from pipelines.loop.margins_read import read_once
+
         current: dict[str, dict[str, Any]] = {}  # cell key -> its margins now
+        in_force = read_once()  # the calibrations read once for every cell, not once a cell
         log = self.out / EPISODES_FILE
         for i, stored, made in sorted(self._margins.values(), key=lambda first: first[0]):
             key = self.tasks[i].cell.key
             if key not in current:
-                current[key] = planned_margins(self.tasks[i].cell)
+                current[key] = planned_margins(self.tasks[i].cell, in_force)
             if stored != current[key]:
                 raise PipelineError(
                     f"{log} holds episodes of {key} planned with {_margins_change(stored, current[key])}: "
@@ -238,24 +241,30 @@ def _keep_first(firsts: dict[Any, tuple[Any, ...]], key: Any, value: tuple[Any, 
         firsts[key] = value
 
 
-def planned_margins(cell: Cell) -> dict[str, Any]:
+def planned_margins(cell: Cell, blocks: Callable[[], InForce] | None = None) -> dict[str, Any]:
     """The margins ``cell``'s MPC plans with now, as its records state them (MPCController.describe's
-    "margins": the same for every human, and per motion class), in their JSON form."""
+    "margins": the same for every human, and per motion class), in their JSON form; ``blocks``:
+    ``margins_planned``'s."""
     from pipelines.loop.mpc_setup import mpc_config
 
     spec = cell.spec.behind(cell.world.sensor_range, cell.world.sensor_tracks)  # as the worker builds it
     horizon = mpc_config(spec, world=cell.world.env_config().world()).horizon
-    return margins_planned(spec.margins, spec.predictor_name, horizon)
+    return margins_planned(spec.margins, spec.predictor_name, horizon, blocks)
 
 
-def margins_planned(margins: MarginSpec, predictor: str | None, horizon: int) -> dict[str, Any]:
+def margins_planned(
+    margins: MarginSpec, predictor: str | None, horizon: int, blocks: Callable[[], InForce] | None = None
+) -> dict[str, Any]:
     """What ``margins`` plan with now for the zoo's ``predictor`` at ``horizon``, in ``planned_margins``'
     form: a resume checks a cell's records against it, and `config show --from-sweep` a remade
-    calibration's."""
+    calibration's. ``blocks``: the calibration blocks in force, as ``margins_read.read_once`` read them for
+    every cell (None: read here)."""
+    from pipelines.loop.margins import CALIBRATED_MODES
     from predictors.registry import checkpoint_sha256
 
     sha256 = checkpoint_sha256(predictor)
-    at = margins.located(predictor, horizon, sha256)  # the calibrations read once, as the controller does
+    read = blocks() if blocks is not None and margins.mode in CALIBRATED_MODES else None
+    at = margins.located(predictor, horizon, sha256, read)  # read once, as the controller does
     classes = margins.resolve_classes(predictor, horizon, sha256, at)
     planned = {
         "margins_m": list(margins.resolve(predictor, horizon, sha256, at)),

@@ -35,6 +35,7 @@ from crowdsim.world import is_sensor_range
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
     from pathlib import Path
 
     from predictors.calibration import Calibration
@@ -42,6 +43,7 @@ if TYPE_CHECKING:
     from predictors.conformal_classes import ClassMargins
 
     Located = tuple[Path, Calibration]  # a calibrations file and the block of it planned with
+    InForce = Sequence[Located]  # every block in force, with its file (stored_calibrations')
 
 MarginMode = Literal["none", "conformal", "conformal-motion", "conformal-shortfall", "fixed"]
 CalibrationSource = Literal["closed-loop", "real"]
@@ -142,11 +144,14 @@ class MarginSpec:
         source = "" if self.source == "closed-loop" else f"-{self.source}"  # per-class modes: closed-loop
         return f"{LABEL_PREFIXES[self.mode]}{alpha_text(self.alpha)}{source}"
 
-    def located(self, predictor: str | None, horizon: int, sha256: str | None) -> Located | None:
+    def located(
+        self, predictor: str | None, horizon: int, sha256: str | None, blocks: InForce | None = None
+    ) -> Located | None:
         """The calibrations file and block these margins plan with (None: a mode that needs none), read once
         for ``resolve``, ``resolve_classes`` and ``calibration``: read by each, a controller planned with a
-        block a calibrate run replaced between the reads, and its records named the new one."""
-        return self._located(predictor, horizon, sha256) if self.mode in CALIBRATED_MODES else None
+        block a calibrate run replaced between the reads, and its records named the new one. ``blocks``:
+        ``stored``'s."""
+        return self._located(predictor, horizon, sha256, blocks) if self.mode in CALIBRATED_MODES else None
 
     def resolve(
         self, predictor: str | None, horizon: int, sha256: str | None, at: Located | None = None
@@ -186,13 +191,18 @@ class MarginSpec:
             )
         return table
 
-    def _located(self, predictor: str | None, horizon: int, sha256: str | None) -> Located:
-        at = self.stored(predictor, sha256)  # the calibrations file holding the block planned with, and it
+    def _located(
+        self, predictor: str | None, horizon: int, sha256: str | None, blocks: InForce | None = None
+    ) -> Located:
+        at = self.stored(predictor, sha256, blocks=blocks)  # the file holding the block planned with, and it
         self.check_planned(at, at[1].predictor, horizon)
         return at
 
-    def stored(self, predictor: str | None, sha256: str | None, kind: Kind = ...) -> Located:
-        """``located``'s file and block, unchecked against the horizon; ``kind``: ``locate_calibration``'s."""
+    def stored(
+        self, predictor: str | None, sha256: str | None, kind: Kind = ..., blocks: InForce | None = None
+    ) -> Located:
+        """``located``'s file and block, unchecked against the horizon; ``kind`` and ``blocks`` (its
+        ``stored``: the blocks in force as a caller read them, None: read here): ``locate_calibration``'s."""
         if predictor is None:
             raise PipelineError("conformal margins need a predictor; this controller uses none")
         from predictors.calibration_store import locate_calibration
@@ -213,6 +223,7 @@ class MarginSpec:
             sensor_range=self.sensor_range,
             sensor_tracks=self.sensor_tracks,
             kind=kind,
+            stored=blocks,
         )
 
     def check_planned(self, at: Located, predictor: str, horizon: int, kind: Kind = ...) -> None:

@@ -12,9 +12,10 @@ from pipelines.errors import PipelineError
 from predictors.errors import PredictorError, short_repr
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
     from types import EllipsisType
 
-    from pipelines.loop.margins import Located, MarginSpec
+    from pipelines.loop.margins import InForce, Located, MarginSpec
     from predictors.calibration import Calibration
     from predictors.calibration_store import ModelKind
 
@@ -42,18 +43,25 @@ if TYPE_CHECKING:
 
 
 def look_up(
-    margins: MarginSpec, predictor: str | None, horizon: int, sha256: str | None, kind: ModelKind = ...
+    margins: MarginSpec,
+    predictor: str | None,
+    horizon: int,
+    sha256: str | None,
+    kind: ModelKind = ...,
+    blocks: Callable[[], InForce] | None = None,
 ) -> Planned:
     """``margins.located`` as a controller of ``horizon`` steps planning with ``predictor`` (its weights'
     ``sha256``) reads it, with its per-class margins (``resolve_classes``); a refusal of either (a
     ``PipelineError`` or ``PredictorError``) comes back as ``Refused``, other errors go on. ``kind``: that of
-    ``predictor``'s zoo entry, as the caller located it, for the calibrate command a refusal quotes."""
+    ``predictor``'s zoo entry, as the caller located it, for the calibrate command a refusal quotes;
+    ``blocks``: the blocks in force, as ``read_once`` read them for every lookup of a plan (None: read
+    here)."""
     from pipelines.loop.margins import CALIBRATED_MODES
 
     if margins.mode not in CALIBRATED_MODES:
         return None
     try:
-        at = margins.stored(predictor, sha256, kind)
+        at = margins.stored(predictor, sha256, kind, None if blocks is None else blocks())
     except (PipelineError, PredictorError) as exc:
         return Refused(exc)
     try:
@@ -62,6 +70,28 @@ def look_up(
     except (PipelineError, PredictorError) as exc:
         return Refused(exc, at)
     return at
+
+
+def read_once() -> Callable[[], InForce]:
+    """The calibration blocks in force (``stored_calibrations``), read at the first call and given again,
+    or their refusal (a damaged file) raised again, at every later one: the lookups of a plan's
+    predictors each read calibrations.json, so that a calibrate run between the reads had one predictor's
+    margins checked against another content of the file than the next one's."""
+    read: list[InForce | Exception] = []
+
+    def blocks() -> InForce:
+        if not read:
+            from predictors.calibration_store import stored_calibrations
+
+            try:
+                read.append(stored_calibrations())
+            except (PipelineError, PredictorError) as exc:
+                read.append(exc)
+        if isinstance(read[0], Exception):
+            raise read[0]
+        return read[0]
+
+    return blocks
 
 
 def load_refused(

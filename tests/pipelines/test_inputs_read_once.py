@@ -389,3 +389,49 @@ def test_a_sweep_of_a_predictor_no_zoo_holds_reads_the_manifest_once(tmp_path, m
     assert error.startswith("crowdmpc sweep: error: experiment 'table2' needs predictors ['nope'] that are")
     assert error.endswith("(check the names --predictor gives, or train or fetch the zoo models)")
     assert opened[shipped / "manifest.json"] == 1 and opened[shipped / "calibrations.json"] <= 1
+
+
+def test_a_sweep_of_two_predictors_reads_the_calibrations_once(tmp_path, monkeypatch):
+    """planned_margins looked each predictor's block up with a read of calibrations.json of its own: the
+    predictors experiment of social_lstm_eth and social_gan_eth read the file twice, and a calibrate run
+    between the reads had the two predictors' margins checked against two contents of it."""
+    from pipelines.cli import main
+    from predictors import zoo
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    shipped = zoo.checkpoints_dir().resolve()
+    opened = count_opens(monkeypatch, ".json")
+    plan = ["--experiment", "predictors", "--predictors", "social_lstm_eth,social_gan_eth", "--humans", "5"]
+    plan += ["--episodes-per-cell", "1", "--margins", "conformal:0.1", "--vary", "mpc.horizon=3,4"]
+    assert main(["sweep", *plan, "--dry-run", "--out", str(tmp_path / "sweep")]) == 0
+    assert opened[shipped / "calibrations.json"] == 1
+
+
+def test_a_resume_checks_every_cells_margins_against_one_read_of_the_calibrations(tmp_path, monkeypatch):
+    """The resume check looked each recorded cell's margins up with a read of calibrations.json of its own:
+    four cells of two predictors read it four times, and a calibrate run between the reads had the cells
+    checked against two contents of the file."""
+    from pipelines.experiments.cells import get_experiment
+    from pipelines.experiments.resume_checks import ResumeChecks, planned_margins
+    from pipelines.loop.margins import MarginSpec
+    from predictors import zoo
+    from predictors.registry import checkpoint_sha256
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    names = ("social_lstm_eth", "social_gan_eth")
+    experiment = get_experiment("predictors").with_predictors(names).with_margins(MarginSpec("conformal"))
+    tasks = experiment.tasks(1, humans=(5, 6), n_robots=1)
+    checks = ResumeChecks(tmp_path, tasks)
+    for task in tasks:  # each cell's record, of the margins it plans with now
+        name = task.cell.spec.predictor_name
+        margins = {"mode": "conformal", "alpha": 0.1, **planned_margins(task.cell)}
+        record = {
+            "predictor": name,
+            "predictor_sha256": checkpoint_sha256(name),
+            "config": {"margins": margins},
+        }
+        checks.add({"key": task.key, **record})
+    opened = count_opens(monkeypatch, ".json")
+    checks.check()
+    assert len(tasks) == 4
+    assert opened[zoo.checkpoints_dir().resolve() / "calibrations.json"] == 1
