@@ -115,7 +115,8 @@ def run(args: argparse.Namespace) -> int:
         # log is read once (and its planned lines once more, by offset, for episodes.csv), not scanned again
         log = LogRead.of_plan(cells, tasks)
         try:
-            status = run_cells(config, log)
+            weights = None if models is None else models.weights()  # the workers load those checked
+            status = run_cells(config, log, weights)
         except SweepStopped:
             report_stopped(config, cells, tasks, log)  # what it recorded stands
             raise

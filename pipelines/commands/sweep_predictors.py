@@ -31,6 +31,13 @@ class PlanModels(NamedTuple):
     # before it), which ``check_predictors`` raises
     refused: PipelineError | PredictorError | None = None
 
+    def weights(self) -> dict[str, str | None]:
+        """The sha256 of the weights each model ``loaded`` holds, by name, which a sweep's workers must load
+        (pipelines.experiments.checked_weights)."""
+        from predictors.registry import loaded_sha256
+
+        return {name: loaded_sha256(model) for name, model in self.loaded.items()}
+
 
 def check_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None = None) -> PlanModels:
     """Fail before starting workers, not once per episode in errors.jsonl: every predictor is registered or

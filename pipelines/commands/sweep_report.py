@@ -15,7 +15,7 @@ import json
 import sys
 import zlib
 from collections import Counter
-from collections.abc import Callable, Collection, Iterator
+from collections.abc import Callable, Collection, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -355,14 +355,16 @@ def _recorded(config: SweepConfig) -> int:
     return sum(record["key"] in planned for _, _, record in episode_log(config.out).scan(repair=False))
 
 
-def run_cells(config: SweepConfig, log: LogRead | None = None) -> int:
+def run_cells(
+    config: SweepConfig, log: LogRead | None = None, weights: Mapping[str, str | None] | None = None
+) -> int:
     """Runs the episodes not yet recorded and says how it went; returns the exit status (EPISODES_RAISED: some
     episodes raised, INTERRUPTED). ``log``: given every record of the log, those held and those this run
-    appends."""
+    appends; ``weights``: ``run_sweep``'s, the weights the plan's checks loaded."""
     from pipelines.experiments.sweep import run_sweep
 
     status = 0
-    outcome = run_sweep(config, records=None if log is None else log.add)
+    outcome = run_sweep(config, records=None if log is None else log.add, weights=weights)
     if outcome.interrupted:  # the log's own count: a SIGTERM between a record's append and its count
         outcome.ran = _recorded(config) - outcome.already_done
     done = outcome.already_done + outcome.ran

@@ -23,7 +23,7 @@ import functools
 import json
 import sys
 import time
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import asdict, dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -31,6 +31,7 @@ from typing import Any, Final
 
 from pipelines.errors import PipelineError, SweepStopped
 from pipelines.experiments.backends import Backend, check_backend, make_backend
+from pipelines.experiments.checked_weights import with_checked_weights, zoo_weights
 from pipelines.experiments.log import (
     ERRORS_FILE,
     SWEEP_FILE,
@@ -195,6 +196,7 @@ def run_sweep(
     *,
     backend_factory: Callable[[SweepConfig, str], Backend] | None = None,
     records: Callable[[int, bytes, dict[str, Any]], None] | None = None,
+    weights: Mapping[str, str | None] | None = None,
 ) -> SweepOutcome:
     """Run every planned episode that ``<out>/episodes.jsonl`` does not hold yet.
 
@@ -203,7 +205,9 @@ def run_sweep(
     sweep removes when the driver was killed, pipelines.experiments.worker). ``records(offset, line,
     record)``: called with each record of the log as ``EpisodeLog.scan`` gives it, those it held as the
     resume reads them, then each this run appends (read back from its line): the report of the run
-    (``crowdmpc sweep``) needs not read the log again."""
+    (``crowdmpc sweep``) needs not read the log again. ``weights``: the sha256 of each zoo predictor's weights
+    as the caller checked them (``crowdmpc sweep``: check_plan's loads), which every worker's load must
+    match (pipelines.experiments.checked_weights; None: the zoo's manifests' as the run starts)."""
     _refuse_in_worker_start()
     out = Path(config.out)
     if backend_factory is None:  # a choice refused here leaves no folder, nor a line in sweep.json
@@ -238,6 +242,7 @@ def run_sweep(
         if not todo:
             add_run()
             return outcome
+        todo = with_checked_weights(todo, zoo_weights(todo) if weights is None else weights)
         scratch = make_scratch_root()
         try:
             with terminate_as_interrupt():

@@ -15,7 +15,7 @@ The experiments these make up, and the registry of those the project ships, are 
 from __future__ import annotations
 
 import numbers
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import TYPE_CHECKING, Any, Final
 
@@ -177,6 +177,9 @@ class EpisodeTask:
     index: int  # episode index within the cell
     scenario: str
     seed: int
+    # the sha256 of the cell's predictor's weights as the sweep's driver checked them, which the worker's load
+    # must match (pipelines.experiments.checked_weights); None: nothing to check. Not part of the episode
+    weights_sha256: str | None = field(default=None, compare=False)
 
     @cached_property
     def key(self) -> str:

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError, interrupt_behind
+from pipelines.experiments.checked_weights import check_loaded_weights
 from pipelines.experiments.deadline import EpisodeTimeout, check_timeout, deadline, timeout_error
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.loop.contract import checked_description, episode_config
@@ -258,6 +259,11 @@ class EpisodeWorker:
         controller = make_controller(
             cell.spec.behind(world.sensor_range, world.sensor_tracks), env_config, jit=self.jit
         )
+        try:  # loaded again here, after the driver checked them: a `zoo add --replace` may have come between
+            check_loaded_weights(task, controller)
+        except PipelineError:
+            controller.close()
+            raise
         controller = behind_sensor(
             controller, world.sensor_range, world.sensor_tracks, cell.n_robots, cell.n_humans, world.crowd
         )

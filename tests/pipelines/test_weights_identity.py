@@ -233,3 +233,35 @@ def test_real_calibration_names_the_weights_it_measured_when_they_are_replaced_m
     assert main(argv) == 0
     [block] = json.loads(out.read_text())["blocks"]
     assert block["predictor_sha256"] == replaced[0].sha256
+
+
+def test_a_sweeps_workers_refuse_weights_replaced_after_the_driver_checked_them(
+    tmp_path, monkeypatch, capsys
+):
+    """A sweep's workers load each predictor again after the driver checked it (processes): a `zoo add
+    --replace` in between (retraining into the zoo during a sweep) had every episode run, and be recorded,
+    with other weights than the sweep checked. Each worker now refuses them, naming the file, and no episode
+    of them is recorded."""
+    from pipelines.experiments import sweep
+    from predictors import zoo
+
+    options, user, new_weights = _calibrate_zoo(tmp_path)
+    checked = zoo.locate("mine").entry.sha256
+    # as the run starts: after check_plan loaded the weights, before any worker does
+    replaced = _replace_at_call(monkeypatch, sweep, "make_scratch_root", 1, new_weights, **options)
+    out = tmp_path / "sweep"
+    plan = ["--experiment", "table2", "--predictor", "mine", "--humans", "2", "--robots", "1"]
+    plan += ["--episodes-per-cell", "1", "--backend", "inline", "--set", "env.time_limit=2"]
+    main(["sweep", *plan, "--no-progress", "--out", str(out)])
+    assert replaced and replaced[0].sha256 != checked
+    log = out / "episodes.jsonl"
+    assert not log.exists() or not log.read_text().strip()  # no episode of the new weights recorded
+    errors = [json.loads(line) for line in (out / "errors.jsonl").read_text().splitlines()]
+    assert len(errors) == 2  # CMPC's and DMPC's episode
+    last = errors[0]["error"].strip().splitlines()[-1]
+    assert last == (
+        f"pipelines.errors.PipelineError: predictor 'mine': the weights {user / 'mine.pt'} have sha256 "
+        f"{replaced[0].sha256}, not the {checked} this sweep checked before its workers started (replaced "
+        "in the zoo since, `zoo add --replace`?); no episode runs on them: sweep the new weights into "
+        "another --out, or put the checked ones back and rerun to resume"
+    )
