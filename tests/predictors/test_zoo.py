@@ -685,3 +685,22 @@ def test_a_user_zoo_that_is_a_file_is_refused_where_the_zoos_are_read(tmp_path, 
         PredictorError, match=r"^\$CROWDMPC_ZOO: the user zoo .*junk.mcap is a file, not a dir"
     ):
         locate("social_lstm_eth")
+
+
+def test_a_zoo_config_without_net_builds_the_kinds_default_net(tmp_path):
+    """Every config `crowdmpc train` wrote and every shipped one holds "net", but `zoo add` has always taken a
+    config without it (written by hand or by another tool) into the user zoo: it loads with the model kind's
+    default net (docs/outputs.md, NAME.json), where a refusal would stop the zoos and sweep folders that
+    earlier versions made with it."""
+    from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+
+    weights, config = checkpoint.save_checkpoint(
+        SocialLSTM(SocialLSTMConfig()), model="social_lstm", name="nonet", out_dir=tmp_path / "src", obs_len=9
+    )
+    document = json.loads(config.read_text())
+    del document["net"]
+    config.write_text(json.dumps(document))
+    options = {"protocol": "p", "training_data": {}, "metrics": {}, "directory": tmp_path / "zoo"}
+    zoo_edit.add_to_zoo(weights, name="nonet", **options)
+    assert "net" not in json.loads((tmp_path / "zoo" / "nonet.json").read_text())
+    assert zoo.load_zoo("nonet", tmp_path / "zoo").net.config == SocialLSTMConfig()
