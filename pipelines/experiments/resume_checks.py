@@ -212,7 +212,8 @@ def _margins_change(was: dict[str, Any], now: dict[str, Any]) -> str:
     whose margins differ (per-class modes plan with those alone, and their common margins are [] on both
     sides: the refusal had read "margins [] m, but ... now [] m")."""
     if was["margins_m"] != now["margins_m"]:
-        return f"margins {was['margins_m']} m, but the cell's margins are now {now['margins_m']} m"
+        old_m, new_m = _apart(was["margins_m"], now["margins_m"])
+        return f"margins {old_m} m, but the cell's margins are now {new_m} m"
     old, new = (c if isinstance(c, dict) else {} for c in (was["classes"], now["classes"]))
     names, a_rows, b_rows = old.get("names"), old.get("quantiles"), new.get("quantiles")
     # a damaged record's rows: compare what both hold
@@ -225,14 +226,31 @@ def _margins_change(was: dict[str, Any], now: dict[str, Any]) -> str:
         return "other motion classes than the cell's now"
     name, a, b = differ[0]
     more = f" (and {len(differ) - 1} more class{'es' * (len(differ) > 2)})" if len(differ) > 1 else ""
-    return f"margins per motion class, {name} {_rounded(a)} m, but the cell's are now {_rounded(b)} m{more}"
+    a_text, b_text = _apart(a, b)
+    return f"margins per motion class, {name} {a_text} m, but the cell's are now {b_text} m{more}"
 
 
-def _rounded(values: Any) -> str:
-    """A class's margins to the millimetre (a calibration's quantiles have 17 digits)."""
-    if isinstance(values, list) and all(isinstance(v, int | float) for v in values):
-        return "[" + ", ".join(f"{v:.3f}" for v in values) + "]"
-    return str(values)
+def _apart(was: Any, now: Any) -> tuple[str, str]:
+    """Two lists of margins (m) rounded to the millimetre, or to as many more decimals as tell them apart: a
+    calibration's quantiles have 17 digits, which the common margins were printed with, and the class
+    margins' millimetres printed a move of 1e-5 m as the same margins twice ("[0.183] m, but the cell's are
+    now [0.183] m"). Each value is the shortest repr of its rounding (0.18, not 0.180); what is not a list of
+    numbers (a damaged record) is shown as it is."""
+    if not all(_numbers(values) for values in (was, now)):
+        return str(was), str(now)
+    for decimals in range(3, 18):
+        texts = tuple(_rounded(values, decimals) for values in (was, now))
+        if texts[0] != texts[1]:
+            return texts[0], texts[1]
+    return str(was), str(now)  # the same to 17 decimals: in full
+
+
+def _numbers(values: Any) -> bool:
+    return isinstance(values, list) and all(isinstance(v, int | float) for v in values)
+
+
+def _rounded(values: list[float], decimals: int) -> str:
+    return "[" + ", ".join(repr(round(float(v), decimals)) for v in values) + "]"
 
 
 def _keep_first(firsts: dict[Any, tuple[Any, ...]], key: Any, value: tuple[Any, ...]) -> None:

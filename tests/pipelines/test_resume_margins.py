@@ -31,10 +31,34 @@ def test_per_class_margins_name_the_first_class_that_changed_and_count_the_other
     was = [[0.04, 0.11], [0.0, 0.0], [0.13584, 0.32], [0.0923061107, 0.23]]
     now = [[0.04, 0.11], [0.0, 0.0], [0.2, 0.4], [0.1, 0.3]]
     assert _margins_change(_planned([], was), _planned([], now)) == (
-        "margins per motion class, slow [0.136, 0.320] m, but the cell's are now [0.200, 0.400] m "
+        "margins per motion class, slow [0.136, 0.32] m, but the cell's are now [0.2, 0.4] m "
         "(and 1 more class)"
     )
-    assert _margins_change(_planned([], was), _planned([], [*was[:3], now[3]])).endswith("[0.100, 0.300] m")
+    assert _margins_change(_planned([], was), _planned([], [*was[:3], now[3]])).endswith("[0.1, 0.3] m")
+
+
+def test_margins_are_shown_to_the_decimals_that_tell_them_apart():
+    """The common margins were printed as recorded, a calibration's 17 digits, and the class margins to the
+    millimetre, so a 1e-5 m move read as the same margins twice ("[0.183] m, but ... now [0.183] m")."""
+    was, moved = [0.18000000000000002, 0.36000000000000004], [0.18001, 0.36000000000000004]
+    assert _margins_change(_planned(was), _planned(moved)) == (
+        "margins [0.18, 0.36] m, but the cell's margins are now [0.18001, 0.36] m"
+    )
+    assert _margins_change(_planned(was), _planned([0.2, 0.36])) == (
+        "margins [0.18, 0.36] m, but the cell's margins are now [0.2, 0.36] m"
+    )
+    classes = [[0.04], [0.0], [0.18291234567891], [0.3]]
+    nudged = [[0.04], [0.0], [0.18292234567891], [0.3]]
+    assert _margins_change(_planned([], classes), _planned([], nudged)) == (
+        "margins per motion class, slow [0.18291] m, but the cell's are now [0.18292] m"
+    )
+    # the same to 17 decimals: in full; a damaged record's rows (no numbers): as they are
+    assert _margins_change(_planned([1e-18]), _planned([2e-18])) == (
+        "margins [1e-18] m, but the cell's margins are now [2e-18] m"
+    )
+    assert _margins_change(_planned(["x"]), _planned([0.1])) == (
+        "margins ['x'] m, but the cell's margins are now [0.1] m"
+    )
 
 
 def test_classes_that_changed_otherwise_are_said_so():
@@ -87,7 +111,7 @@ def test_a_recalibration_that_moved_a_class_count_and_no_margin_extends_the_cell
     _calibrate_classes(standing_error=1.0)  # a margin moved: refused as before
     capsys.readouterr()
     assert main([*SHORTFALL_ARGV, "--episodes-per-cell", "6", "--out", str(out)]) == 2
-    assert "planned with margins per motion class, standing [0.360, 0.720" in capsys.readouterr().err
+    assert "planned with margins per motion class, standing [0.36, 0.72" in capsys.readouterr().err
 
 
 def test_a_calibration_remade_with_the_margins_planned_with_gives_no_note_of_other_episodes(tmp_path, capsys):
