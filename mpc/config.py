@@ -115,11 +115,21 @@ MPC_BOUNDS: Final[dict[str, tuple[float, str]]] = {
 # At 1e-40 the NLP stays far from overflow (mpc/step_data.py); so does guidance's penalty disc, which divides
 # by mu w_goal (w_goal = 5e-324 with mu = 1e-3 made it zero). Checked as MPC_BOUNDS are (see there).
 # time_limit_s never enters the NLP; it is IPOPT's max_wall_time (mpc.sizes.LEAST_STEP_TIME has its least).
+# tau, v_max and a_max are the world's facts: a run takes them from the world, which refuses less
+# (crowdsim.world.LEAST), and an MPCConfig built in Python is held to the same least values: "> 0" let
+# through an MPC that never moved and called every step "ok" (tau = 1e-300 planned a horizon of 4e-300 s,
+# and 5e-324 overflowed the plan's clipping, (v_max - v) / tau, to inf; v_max = 5e-324 gave a reference
+# speed of 0; a_max = 1e-300 left two converging robots unable to part, Eq. 12 costing 6.9e6 each step).
+# d_flock is no fact of the world's, but a length like them: Eq. 15's smoothed norm is never below
+# sqrt(delta), so no least value changes what it does, and a millionth of a metre, the world's least
+# length, keeps subnormals (5e-324 ran as 1e-300 did) out of the runs and their records.
 MPC_LEAST: Final = {
     "mu": (1e-3, " 1/m^2"),
     "delta": (1e-40, ""),
     "w_goal": (1e-40, ""),
     "time_limit_s": (LEAST_STEP_TIME, " s"),
+    **{name: (world.LEAST[name][0], f" {world.LEAST[name][1]}") for name in ("dt", "v_max", "a_max")},
+    "d_flock": (world.LEAST["radius"][0], " m"),
 }
 
 

@@ -168,6 +168,33 @@ def test_a_solver_is_not_built_beyond_a_bound(solver):
         solver(MPCConfig(rho=2000.0), 3, 2)
 
 
+@pytest.mark.parametrize(
+    ("field", "below", "message"),
+    [
+        ("dt", 5e-324, "dt must be at least 1e-06 s, got 5e-324"),
+        ("dt", 1e-300, "dt must be at least 1e-06 s, got 1e-300"),
+        ("v_max", 1e-12, "v_max must be at least 1e-06 m/s, got 1e-12"),
+        ("a_max", 1e-300, "a_max must be at least 1e-06 m/s^2, got 1e-300"),
+        ("d_flock", 5e-324, "d_flock must be at least 1e-06 m, got 5e-324"),
+    ],
+)
+@pytest.mark.parametrize("solver", [CMPC, DMPC])
+def test_the_worlds_facts_and_d_flock_have_least_values_from_python(field, below, message, solver):
+    """A run takes tau, v_max and a_max from the world, which refuses below crowdsim.world.LEAST, but an
+    MPCConfig built in Python took any float > 0 and its MPC never moved, every step "ok" (tau = 1e-300: a
+    horizon of 4e-300 s; 5e-324 overflowed the plan's clipping, (v_max - v) / tau); d_flock = 5e-324 ran too.
+    The same least values as the world's, from there."""
+    from crowdsim import world
+
+    if field != "d_flock":
+        assert MPC_LEAST[field][0] == world.LEAST[field][0]
+    least = MPC_LEAST[field][0]
+    solver(MPCConfig(**{field: least}), 2, 1)
+    with pytest.raises(MPCConfigError) as exc:
+        solver(MPCConfig(**{field: below}), 2, 1)
+    assert str(exc.value) == message
+
+
 def test_delta_has_a_least_value():
     """Eq. 7 weighs a robot on its goal by w_goal / delta: delta = 1e-300 passed "> 0", and with w_goal = 1e12
     the weight overflowed, the gradient was NaN and a Fatrop solve never returned."""

@@ -299,8 +299,9 @@ def test_a_simulate_path_named_none_reads_back_as_the_file_it_was(tmp_path, caps
         (MPC_LEAST, "w_goal", 0.0, "1e-300", "1e-300", "at least 1e-40", "5e-324"),  # no guidance: it ran
         (MPC_BOUNDS, "rho", math.inf, "2000", "2000.0", "at most 1000 s^2", "1e+300"),
         (MPC_LEAST, "time_limit_s", 0.0, "1e-12", "1e-12", "at least 1e-09 s", "5e-324"),
+        (MPC_LEAST, "d_flock", 0.0, "1e-12", "1e-12", "at least 1e-06 m", "5e-324"),
     ],
-    ids=["least", "least_w_goal", "most", "least_time_limit_s"],
+    ids=["least", "least_w_goal", "most", "least_time_limit_s", "least_d_flock"],
 )
 def test_a_sweep_run_beyond_a_bound_added_since_reads_back_and_does_not_rerun(
     tmp_path, capsys, monkeypatch, bounds, key, lifted, ran, shown, limit, typed
@@ -310,7 +311,8 @@ def test_a_sweep_run_beyond_a_bound_added_since_reads_back_and_does_not_rerun(
     config show --from-sweep, which run nothing, since MPCConfig checked the bounds; only a run is refused
     now, as its NLP would be."""
     out = tmp_path / "sweep"
-    options = ["--experiment", "controllers", "--controllers", "cmpc", "--humans", "1", "--robots", "1"]
+    robots = "2" if key == "d_flock" else "1"  # a flock of one is refused its d_flock
+    options = ["--experiment", "controllers", "--controllers", "cmpc", "--humans", "1", "--robots", robots]
     options += ["--episodes-per-cell", "1", "--set", "env.time_limit=2", "--backend", "inline"]
     options += ["--no-progress"]
     with monkeypatch.context() as before:  # the code before the bound
