@@ -97,6 +97,26 @@ def is_sensor_range(value: object) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool) and 0 < value < math.inf
 
 
+# The least and greatest sensor range (m) a run may ask for. Least: the world's least length (LEAST), as
+# "> 0" took 5e-324, a sensor that saw nobody, its sweep cells labelled "sensed5e-324m". Greatest: a
+# kilometre, as the MPC's lengths (mpc.config.MPC_BOUNDS), far beyond any crowd (the scenes are 10 m across,
+# the replayed ones tens of metres), where every human is in view: simulate --plot draws each robot's range
+# as a dashed ring whose dashes grow with it, and one ring of 1e6 m took 24 s, of 1e300 m never finished.
+# Checked as a run starts and by the sensor itself (pipelines.loop.sensing.RangeLimited), not by
+# is_sensor_range, so a sweep folder that ran beyond them still reads back.
+SENSOR_RANGE: Final[tuple[float, float]] = (LEAST["radius"][0], 1e3)
+
+
+def sensor_range_beyond(value: float) -> str | None:
+    """Why sensor range ``value`` (already ``is_sensor_range``) is refused as a run starts, "must be at least
+    1e-06 m, got 5e-324", or None when within ``SENSOR_RANGE``."""
+    least, most = SENSOR_RANGE
+    if least <= value <= most:
+        return None
+    bound, side = (least, "least") if value < least else (most, "most")
+    return f"must be at {side} {bound:g} m, got {float(value)!r}"
+
+
 WORLD: Final[WorldFacts] = WorldFacts()
 DT: Final[float] = WORLD.dt
 OBS_LEN: Final[int] = WORLD.obs_len

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from crowdsim.world import sensor_range_beyond
 from pipelines.commands.idle_choices import (
     SAMPLING_KEYS,
     shown_choice,
@@ -101,6 +102,10 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> PredictorRea
             f"{shown_choice(config, 'simulate', 'sensor_tracks', False)}: track lengths are a sensor's; give "
             "--sensor-range M too (or [simulate] sensor_range)"
         )
+    sensed = config.simulate.sensor_range
+    beyond = None if sensed is None else sensor_range_beyond(sensed)
+    if beyond is not None:  # here, not by SimulateSettings: a sweep folder that ran one reads back
+        raise config.error("simulate", "sensor_range", beyond)
     _refuse_untracked(config, spec.controller)
     _refuse_unseen_visibility(config)
     _refuse_unsampled(config)

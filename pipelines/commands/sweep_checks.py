@@ -77,7 +77,8 @@ def check_plan(
     controllers (an entry point that would shadow a shipped one is refused here, as ``simulate`` refuses it,
     not in every episode's worker), its predictors (``check_predictors``), the couplings their methods build
     with them (``check_couplings``), the margins they plan with (``check_margins``), the MPC's d_min against
-    the agents' contact distance (``check_contact_distances``) and its bounds (``check_solvable_values``).
+    the agents' contact distance (``check_contact_distances``), the sensor's range (``check_sensor_ranges``)
+    and the MPC's bounds (``check_solvable_values``).
     With the run's ``cfg``, a refusal of a value the run chose names where it chose it first ("run.toml:
     mpc.d_min: method 'CMPC' of ..."), as simulate's do: they named the method alone, and a file's value
     looked like one of the experiment's. ``models``: ``check_predictors``' as ``noted_models`` made them
@@ -100,6 +101,7 @@ def check_plan(
             (("controller", "margins"), ("mpc", "horizon"), *SENSING_KEYS),
         ),
         (check_contact_distances, (("mpc", "d_min"),)),
+        (check_sensor_ranges, SENSING_KEYS[:1]),
         (check_solvable_values, SOLVABLE_KEYS),
     ):
         try:
@@ -177,6 +179,19 @@ def check_contact_distances(experiment: Experiment) -> None:
     _each_mpc(
         experiment, lambda mpc: check_contact_distance(WORLD, mpc, radius_settable=False), PipelineError
     )
+
+
+def check_sensor_ranges(experiment: Experiment) -> None:
+    """The range of the sensor the methods see through (a --vary column's too) within
+    ``crowdsim.world.SENSOR_RANGE``, as the sensor checks it as it is built (``RangeLimited``), refused here,
+    not once per episode in errors.jsonl; a --report-only of a folder that ran beyond them runs no such
+    check."""
+    from crowdsim.world import sensor_range_beyond
+
+    for world in (experiment.world, *experiment.method_worlds.values()):
+        beyond = None if world.sensor_range is None else sensor_range_beyond(world.sensor_range)
+        if beyond is not None:
+            raise PipelineError(f"the sensor range {beyond}")
 
 
 def check_solvable_values(experiment: Experiment) -> None:

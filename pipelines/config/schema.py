@@ -232,9 +232,9 @@ SIMULATE_KEYS: Final = (
         "sensor_range",
         "float",
         None,
-        "m: the controller sees only the humans within this distance of some robot, each from when it came "
-        "into view, as a tracker gives them (pipelines/loop/sensing.py; --sensor-range; a sweep puts every "
-        "method behind it); unset: every human",
+        "m, 1e-06 to 1000: the controller sees only the humans within this distance of some robot, each from "
+        "when it came into view, as a tracker gives them (pipelines/loop/sensing.py; --sensor-range; a sweep "
+        "puts every method behind it); unset: every human",
         3.0,
     ),
     Key(

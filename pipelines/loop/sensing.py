@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from crowdsim.world import is_sensor_range
+from crowdsim.world import is_sensor_range, sensor_range_beyond
 from pipelines.errors import PipelineError
 from pipelines.loop.contract import called, checked_description, checked_output
 from pipelines.loop.controllers import check_controller
@@ -65,6 +65,9 @@ class RangeLimited:
         radius = radius.item() if isinstance(radius, np.generic) else radius  # np.int64(3) read as no range
         if not (is_sensor_range(radius) or radius == math.inf):  # inf: the tracked humans of a replay
             raise PipelineError(f"sensor radius must be a finite number of metres > 0, got {radius!r}")
+        beyond = None if radius == math.inf else sensor_range_beyond(radius)
+        if beyond is not None:  # what a run's checks refuse, for whoever builds one in Python
+            raise PipelineError(f"sensor radius {beyond}")
         if not isinstance(report_tracks, bool):  # a truthy "no" would report them
             raise PipelineError(f"report_tracks must be True or False, got {report_tracks!r}")
         self.inner, self.radius, self.report_tracks = inner, float(radius), report_tracks
