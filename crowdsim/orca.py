@@ -40,11 +40,15 @@ import numpy as np
 
 from crowdsim.errors import SimulationError, got, real_number, refuse_bools, seconds, whole_number
 from crowdsim.orca_lp import lp2, lp3
-from crowdsim.world import MIN_DT, MOST_COORDINATE
+from crowdsim.world import LEAST, MIN_DT, MOST_COORDINATE
 
 # neighbor_dist is squared (1e300 overflowed the first step): a finite one up to 1000 km, far beyond any
 # crowd; inf, every agent a neighbour, works as it is (inf squared is inf).
 MAX_NEIGHBOR_DIST: Final[float] = 1e6  # m
+# Its least: the world's least length. "> 0" took 5e-324, whose square is 0 (so no agent was ever a
+# neighbour, as at any distance below the closest approach) and which the records then held. Checked as a run
+# starts and by orca_velocities, not by OrcaParams, so that a sweep folder that ran one still reads back.
+LEAST_NEIGHBOR_DIST: Final[float] = LEAST["radius"][0]  # m
 # 1 / time_horizon scales the relative positions: 1e-305 s overflowed the velocity obstacles to inf (and
 # gave velocities pointing away from the goal). A microsecond is far below any horizon (CrowdNav: 5 s).
 MIN_TIME_HORIZON: Final[float] = 1e-6  # s
@@ -81,6 +85,14 @@ class OrcaParams:
             lambda t: t >= MIN_TIME_HORIZON,
         )
         object.__setattr__(self, "time_horizon", horizon)
+
+
+def neighbor_dist_beyond(params: OrcaParams) -> str | None:
+    """Why ``params.neighbor_dist`` is refused as a run starts, "must be at least 1e-06 m, got 5e-324", or
+    None when it is at least ``LEAST_NEIGHBOR_DIST``."""
+    if params.neighbor_dist >= LEAST_NEIGHBOR_DIST:
+        return None
+    return f"must be at least {LEAST_NEIGHBOR_DIST:g} m, got {params.neighbor_dist!r}"
 
 
 def preferred_velocities(
@@ -273,6 +285,9 @@ def orca_velocities(
     max_speeds, whose squares would overflow, and for a shorter dt, whose inverse would.
     """
     refuse_bools("orca_velocities", dt=dt, radii=radii, max_speeds=max_speeds)
+    beyond = neighbor_dist_beyond(params)
+    if beyond is not None:  # what a run's checks refuse, for whoever steps the crowd in Python
+        raise SimulationError(f"orca_velocities: OrcaParams.neighbor_dist {beyond}")
     dt = seconds("orca_velocities: dt", dt)
     positions = np.asarray(positions, dtype=float)
     velocities = np.asarray(velocities, dtype=float)

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from crowdsim.orca import neighbor_dist_beyond
 from crowdsim.world import sensor_range_beyond
 from pipelines.commands.idle_choices import (
     SAMPLING_KEYS,
@@ -106,6 +107,9 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> PredictorRea
     beyond = None if sensed is None else sensor_range_beyond(sensed)
     if beyond is not None:  # here, not by SimulateSettings: a sweep folder that ran one reads back
         raise config.error("simulate", "sensor_range", beyond)
+    beyond = neighbor_dist_beyond(config.env.orca)
+    if beyond is not None:  # and not by OrcaParams
+        raise config.error("env.orca", "neighbor_dist", beyond)
     _refuse_untracked(config, spec.controller)
     _refuse_unseen_visibility(config)
     _refuse_unsampled(config)

@@ -77,8 +77,8 @@ def check_plan(
     controllers (an entry point that would shadow a shipped one is refused here, as ``simulate`` refuses it,
     not in every episode's worker), its predictors (``check_predictors``), the couplings their methods build
     with them (``check_couplings``), the margins they plan with (``check_margins``), the MPC's d_min against
-    the agents' contact distance (``check_contact_distances``), the sensor's range (``check_sensor_ranges``)
-    and the MPC's bounds (``check_solvable_values``).
+    the agents' contact distance (``check_contact_distances``), the sensor's range (``check_sensor_ranges``),
+    ORCA's neighbour distance (``check_neighbor_distances``) and the MPC's bounds (``check_solvable_values``).
     With the run's ``cfg``, a refusal of a value the run chose names where it chose it first ("run.toml:
     mpc.d_min: method 'CMPC' of ..."), as simulate's do: they named the method alone, and a file's value
     looked like one of the experiment's. ``models``: ``check_predictors``' as ``noted_models`` made them
@@ -102,6 +102,7 @@ def check_plan(
         ),
         (check_contact_distances, (("mpc", "d_min"),)),
         (check_sensor_ranges, SENSING_KEYS[:1]),
+        (check_neighbor_distances, (("env.orca", "neighbor_dist"),)),
         (check_solvable_values, SOLVABLE_KEYS),
     ):
         try:
@@ -192,6 +193,18 @@ def check_sensor_ranges(experiment: Experiment) -> None:
         beyond = None if world.sensor_range is None else sensor_range_beyond(world.sensor_range)
         if beyond is not None:
             raise PipelineError(f"the sensor range {beyond}")
+
+
+def check_neighbor_distances(experiment: Experiment) -> None:
+    """ORCA's neighbor_dist in every world the methods run in (a --vary column's too) at least
+    ``crowdsim.orca.LEAST_NEIGHBOR_DIST``, as orca_velocities checks it, refused here, not once per episode
+    in errors.jsonl; a --report-only of a folder that ran less runs no such check."""
+    from crowdsim.orca import neighbor_dist_beyond
+
+    for world in (experiment.world, *experiment.method_worlds.values()):
+        beyond = neighbor_dist_beyond(world.env_config().orca)
+        if beyond is not None:
+            raise PipelineError(f"ORCA's neighbor_dist {beyond}")
 
 
 def check_solvable_values(experiment: Experiment) -> None:

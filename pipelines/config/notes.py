@@ -19,7 +19,8 @@ WORLD_NOTES: Final[Mapping[str, str]] = {
 }
 
 ORCA_NOTES: Final[Mapping[str, str]] = {
-    "neighbor_dist": "m, only agents strictly closer than this are neighbours (CrowdNav's ORCA)",
+    "neighbor_dist": "m, 1e-06 to 1e+06 or inf: only agents strictly closer than this are neighbours "
+    "(CrowdNav's ORCA)",
     "max_neighbors": "the nearest this many neighbours get a half-plane",
     "time_horizon": "s, velocity obstacles are truncated at this horizon",
 }
