@@ -24,7 +24,7 @@ except ImportError:  # pragma: no cover
 
 # The files of the cache, and the only ones cache_admin.clear removes: <key>.casadi, <key>.<tag>.so (its
 # library), <key>.record, <key>.lock, and what a compile killed by SIGKILL leaves (<key>.<tag>.o,
-# .tmp-<key>.<tag>.casadi and .record, crowdmpc_jit_<tag>.c: the generated source).
+# .tmp-<key>.<tag>.casadi and .record, crowdmpc_jit_<tag>.c: the generated source; a library no entry names).
 _KEY = r"[0-9a-f]{64}"
 _TAG = r"\d+_[0-9a-f]{8}"  # <pid>_<random>: the compiling process's
 OWNED: Final[re.Pattern[str]] = re.compile(
@@ -36,6 +36,9 @@ ENTRY: Final[re.Pattern[str]] = re.compile(rf"{_KEY}\.casadi")
 _IN_PROGRESS: Final[re.Pattern[str]] = re.compile(
     rf"(?:{_KEY}\.|\.tmp-{_KEY}\.|crowdmpc_jit_)(?P<pid>\d+)_[0-9a-f]{{8}}\.(?:o|casadi|record|c)"
 )
+# A library, its compiling process's id in the name: a leftover too once no entry names it (a compile
+# SIGKILLed while linking or before publishing left it, partial or whole, and no load ever reads it).
+_LIBRARY: Final[re.Pattern[str]] = re.compile(rf"(?P<key>{_KEY})\.(?P<pid>\d+)_[0-9a-f]{{8}}\.so")
 # How old such a file must be before a compile of a pid not running here counts as killed. The pid says
 # nothing of a compile on another machine sharing the cache ($CROWDMPC_CACHE in a cluster's home directory,
 # jobs on several nodes): its files were removed while its gcc ran, and its episodes raised. A compile uses
@@ -45,22 +48,35 @@ LEFTOVER_AGE_S: Final[float] = 3600.0
 
 def remove_dead_leftovers(folder: Path) -> int:
     """Remove the files of compiles whose process is gone (killed: no ``finally`` ran): the generated source
-    (~0.5 MB), object file and temporary manifest and record, once ``LEFTOVER_AGE_S`` old. Only regular files
-    named as ours, never a symbolic link; a compile of a live process (this one's included) is left alone.
-    Returns how many."""
+    (~0.5 MB), object file, temporary manifest and record, and a library no entry names, once
+    ``LEFTOVER_AGE_S`` old. Only regular files named as ours, never a symbolic link; a compile of a live
+    process (this one's included) is left alone, and so is an entry's library. Returns how many."""
     removed = 0
     with os.scandir(folder) as it:
         entries = [e for e in it if OWNED.fullmatch(e.name)]
     for entry in entries:
-        match = _IN_PROGRESS.fullmatch(entry.name)
+        match = _IN_PROGRESS.fullmatch(entry.name) or _LIBRARY.fullmatch(entry.name)
         if match is None or _alive(int(match["pid"])) or not entry.is_file(follow_symlinks=False):
             continue
         if _younger_than(entry, LEFTOVER_AGE_S):  # maybe another machine's compile under way
+            continue
+        if match.re is _LIBRARY and _an_entrys_library(folder / f"{match['key']}.casadi", entry.name):
             continue
         with contextlib.suppress(FileNotFoundError):  # another process removed it first
             os.unlink(entry.path)
             removed += 1
     return removed
+
+
+def _an_entrys_library(manifest: Path, name: str) -> bool:
+    """Whether the library ``name`` may be the one of the entry ``manifest``: its record names it, or the
+    entry has no record naming one (stored before records were kept: only its manifest names its library,
+    and code of that time may load it). Another library of the key is no entry's: a load reads only the
+    one the record names, and a record never comes to name a library of a process that is gone."""
+    library = _recorded_library(manifest, _readentry_record(manifest))
+    if library is None:
+        return manifest.exists()
+    return library.name == name
 
 
 def _younger_than(entry: os.DirEntry, seconds: float) -> bool:

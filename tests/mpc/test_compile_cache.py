@@ -1,5 +1,6 @@
 """The persistent compile cache: compiled once, loaded after, identical solves, safe under concurrency."""
 
+import json
 import os
 import signal
 import subprocess
@@ -588,6 +589,27 @@ def test_the_files_of_a_compile_on_another_machine_are_left_alone(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(names)
     os.utime(tmp_path / names[0], (time.time() - 2 * LEFTOVER_AGE_S,) * 2)
     assert remove_dead_leftovers(tmp_path) == 1 and not (tmp_path / names[0]).exists()
+
+
+def test_a_library_no_entry_names_is_removed_as_a_killed_compiles(tmp_path):
+    """A compile SIGKILLed while linking (or before it published its entry) left its library, partial or
+    whole, and no cleanup but `cache clear` removed it: no load reads a library no record names. Now it goes
+    once an hour old, as the rest of a killed compile does; an entry's library stays, one from before
+    records (its manifest alone names it) too."""
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True)
+    gone, live = int(dead.stdout), os.getpid()
+    killed, entry, old, other = "ab" * 32, "cd" * 32, "ef" * 32, "12" * 32
+    leftovers = [f"{killed}.{gone}_0123abcd.so", f"{entry}.{gone}_4567abcd.so"]  # the latter: not the entry's
+    kept = [f"{entry}.{gone}_0123abcd.so", f"{old}.{gone}_0123abcd.so", f"{other}.{live}_0123abcd.so"]
+    for name in leftovers + kept:
+        (tmp_path / name).write_text("x")
+        os.utime(tmp_path / name, (time.time() - 2 * LEFTOVER_AGE_S,) * 2)
+    (tmp_path / f"{entry}.casadi").write_text("x")
+    (tmp_path / f"{entry}.record").write_text(json.dumps({"library": kept[0]}))
+    (tmp_path / f"{old}.casadi").write_text("x")  # stored before records were kept
+    assert remove_dead_leftovers(tmp_path) == len(leftovers)
+    assert not {p.name for p in tmp_path.iterdir()} & set(leftovers)
+    assert all((tmp_path / name).exists() for name in kept)
 
 
 def _fma_flags() -> list[str] | None:
