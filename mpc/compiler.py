@@ -1,9 +1,11 @@
-"""The C compiler CasADi's jit calls: which one (gcc on the PATH, as the compile cache's key records it) and
-the shell command CasADi runs it with."""
+"""The C compiler of the jit: which one (gcc on the PATH, as the compile cache's key records it), the
+commands CasADi would run it with, run here so that a signal stops it at once, and the shell command CasADi
+runs in their place."""
 
 from __future__ import annotations
 
 import contextlib
+import os
 import shlex
 import shutil
 import signal
@@ -52,23 +54,116 @@ def compiler() -> Compiler | None:
     return Compiler(path, (out.stdout.splitlines() or ["unknown"])[0].strip(), FLAGS)
 
 
-def interruptible(compiler: str, marker: Path) -> str:
-    """The shell command CasADi runs as the compiler and linker: ``compiler`` with the arguments CasADi
+def interruptible(command: str, marker: Path) -> str:
+    """The shell command CasADi runs as the compiler and linker: ``command`` with the arguments CasADi
     appends, leaving ``marker`` when a SIGINT stopped it. CasADi runs it with ``system()``, which ignores
-    SIGINT in our process while it waits, so a Ctrl-C during a cold compile reached only gcc and came back
-    as "Compilation failed"; the marker lets ``compile_cache`` raise KeyboardInterrupt instead. The
-    shell's trap (not an ignore, which gcc would inherit) runs once gcc has ended; 130 is a child ended by
-    SIGINT."""
+    SIGINT in our process while it waits, so a Ctrl-C then would reach only the shell and come back as
+    "Compilation failed"; the marker lets ``compile_cache`` raise KeyboardInterrupt instead. The compile
+    cache gives ``:`` (gcc has run already, ``run_compiler``): the window is the milliseconds of a shell.
+    The shell's trap (not an ignore, which the command would inherit) runs once the command has ended;
+    130 is a child ended by SIGINT."""
     script = (
         f'trap "stopped=1" INT; "$0" "$@"; status=$?; '
         f'if [ "$status" -eq 130 ] || [ -n "$stopped" ]; then : > {shlex.quote(str(marker))}; fi; '
         f'exit "$status"'
     )
-    return f"/bin/sh -c {shlex.quote(script)} {shlex.quote(compiler)}"
+    return f"/bin/sh -c {shlex.quote(script)} {shlex.quote(command)}"
+
+
+# What CasADi's "shell" plugin runs on Linux (casadi/solvers/shell_compiler.cpp: compiler, flags, its
+# compiler_setup "-fPIC -c", the source, "-o " object; then linker, object, "-o " library, linker_setup
+# "-shared"): run_compiler runs gcc with these, so the library is the one CasADi's own compile made.
+def compile_command(cc: Compiler, source: str, obj: str) -> list[str]:
+    """gcc compiling ``source`` (named as CasADi names it: relative to the cache folder) into ``obj``."""
+    return [cc.path, *cc.flags, "-fPIC", "-c", source, "-o", obj]
+
+
+def link_command(cc: Compiler, obj: str, library: str) -> list[str]:
+    """gcc linking ``obj`` into the shared library ``library``."""
+    return [cc.path, obj, "-o", library, "-shared"]
 
 
 # ended_after_cleanup's check: raises where a compile can stop when an ending signal was noted
 Check = Callable[[], None]
+# How often run_compiler looks for an ending signal noted while gcc runs (ended_after_cleanup's check)
+POLL_S: Final[float] = 0.05
+# How long gcc's group has to end on SIGTERM (its driver removes its files in /tmp first) before SIGKILL
+STOP_S: Final[float] = 5.0
+
+
+def run_compiler(command: list[str], step: str, check: Check) -> None:
+    """Run ``command`` (gcc) in the working directory and wait for it in Python, not in a ``system()`` as
+    CasADi's own compile did: that ignored SIGINT in our process (a `kill -INT` of it alone was lost) and
+    held every signal's handler until gcc returned, 8 s for CMPC's NLP. gcc runs in a process group of its
+    own, so that its whole group (cc1, as, ld) is stopped when the compile is: by a KeyboardInterrupt, or
+    ``check`` raising for an ending signal (polled every POLL_S). RuntimeError when gcc fails, in CasADi's
+    words (``step``: "Compilation" or "Linking"); KeyboardInterrupt when a SIGINT ended gcc itself."""
+    spawn = _Spawn(command)
+    try:
+        spawn.start()
+        spawn.join()
+        started = spawn.started
+        if not isinstance(started, subprocess.Popen):  # gcc gone since it was found: the shell's 127 was
+            raise RuntimeError(f'{step} failed. Tried "{shlex.join(command)}": {started}')  # a failed compile
+        status = _wait(started, check)
+    finally:
+        process = spawn.cancel()
+        if process is not None and process.returncode is None:  # stopped while gcc runs: its group goes
+            _stop_group(process)
+    if status in (-signal.SIGINT, 130):
+        raise KeyboardInterrupt
+    if status != 0:
+        raise RuntimeError(f'{step} failed. Tried "{shlex.join(command)}"')
+
+
+class _Spawn(threading.Thread):
+    """Starts ``command`` in a process group of its own, in a thread of its own: a KeyboardInterrupt raised
+    in the main thread inside Popen (gcc running, Popen waiting to learn that its exec worked) lost the Popen,
+    and gcc ran on (a Ctrl-C test's stand-in outlived its program). ``cancel`` returns the process, if any:
+    none starts after it."""
+
+    def __init__(self, command: list[str]) -> None:
+        super().__init__(name="crowdmpc-gcc", daemon=True)
+        self.command = command
+        self.started: subprocess.Popen | OSError | None = None
+        self._lock = threading.Lock()  # held while Popen runs
+        self._cancelled = False
+
+    def run(self) -> None:
+        with self._lock:
+            if self._cancelled:
+                return
+            try:
+                self.started = subprocess.Popen(self.command, stdin=subprocess.DEVNULL, process_group=0)
+            except OSError as exc:
+                self.started = exc
+
+    def cancel(self) -> subprocess.Popen | None:
+        with self._lock:  # a Popen under way ends first
+            self._cancelled = True
+        return self.started if isinstance(self.started, subprocess.Popen) else None
+
+
+def _wait(process: subprocess.Popen, check: Check) -> int:
+    """``process``'s exit status; ``check`` is called every POLL_S until then (a SIGINT's KeyboardInterrupt
+    is raised at once: a signal interrupts the wait, and Python's handler runs)."""
+    while True:
+        try:
+            return process.wait(timeout=POLL_S)
+        except subprocess.TimeoutExpired:
+            check()
+
+
+def _stop_group(process: subprocess.Popen) -> None:
+    """End the process group ``process`` leads (not yet reaped: its id is still the group's) and reap it."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(process.pid, signal.SIGTERM)
+    try:
+        process.wait(timeout=STOP_S)
+    except subprocess.TimeoutExpired:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
 
 
 class _Ended(BaseException):
@@ -81,7 +176,7 @@ def ended_after_cleanup() -> Iterator[Check]:
     run) is noted instead, and ends the process as it would have once the block is left, its clean-up done:
     a worker a sweep's stop ended while gcc ran left the generated source (~0.5 MB) and object file in the
     cache, and gcc, running on, wrote them after its parent had gone. The yielded check raises where the
-    compile can stop (after gcc: a signal reaches Python only once CasADi's ``system()`` returns). Another
+    compile can stop (while gcc runs, ``run_compiler``; after CasADi's calls, which hold a signal). Another
     handler (the CLI's terminate_as_interrupt, a program's) or an ignored signal is left as it is, and so is
     every signal off the main thread, which may set no handler."""
     noted: list[int] = []

@@ -1,5 +1,6 @@
 """The persistent compile cache: compiled once, loaded after, identical solves, safe under concurrency."""
 
+import contextlib
 import json
 import os
 import signal
@@ -362,6 +363,16 @@ def test_a_failed_compile_is_a_compile_cache_error(cache, monkeypatch, tmp_path)
     assert f'Tried "{failing} -O2 ' in str(e.value) and "trap" not in str(e.value)
 
 
+def test_a_compiler_gone_since_it_was_found_is_a_failed_compile(cache, monkeypatch, tmp_path):
+    """gcc is run here, not by a shell that said "not found" (127): one removed since ``compiler()`` found it
+    is still a failed compile, not an OSError out of the compile."""
+    gone = compile_cache.Compiler(str(tmp_path / "gcc"), "x", ("-O2",))
+    monkeypatch.setattr(compile_cache, "compiler", lambda: gone)
+    with pytest.raises(compile_cache.CompileCacheError, match="Compilation failed"):
+        compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+    assert suffixes(cache) == []
+
+
 def test_a_compile_failed_for_want_of_space_is_a_full_disk_naming_the_cache(cache, monkeypatch, tmp_path):
     """gcc's "No space left on device" reached the user as "Compilation failed" with a traceback (a
     CompileCacheError is no user error); the CLI says a full disk in one line, naming the folder."""
@@ -500,6 +511,91 @@ def test_a_compile_ended_by_sigterm_removes_its_files_and_ends_by_it(cache, tmp_
     assert child.wait(timeout=60) == -signal.SIGTERM
     time.sleep(1.5)  # a gcc that outlived its parent would write its output by now
     assert suffixes(cache) == []
+
+
+STOPPED = """
+import sys
+sys.path.insert(0, {root!r})
+from mpc import compile_cache
+from tests.mpc.test_compile_cache import IPOPT, small_nlp
+compile_cache.compiler = lambda: compile_cache.Compiler({gcc!r}, "x", ("-O2",))
+try:
+    compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+except KeyboardInterrupt:
+    print("KeyboardInterrupt")
+"""
+
+
+def stop_a_slow_compile(cache: Path, tmp_path: Path, signum: int) -> tuple[float, int | None, str]:
+    """Send ``signum`` to a child process alone (not its group) while its compile runs gcc (a stand-in that
+    sleeps 60 s): seconds from the signal to the child's exit (None: not within 15 s), its exit status and
+    what it printed. The stand-in's own process (gcc) is gone by then."""
+    gcc_pid = tmp_path / "gcc.pid"
+    slow = fake_compiler(tmp_path, f"echo $$ > {gcc_pid}.new; mv {gcc_pid}.new {gcc_pid}; exec sleep 60")
+    script = tmp_path / "child.py"
+    script.write_text(textwrap.dedent(STOPPED.format(root=str(ROOT), gcc=slow.path)))
+    env = os.environ | {compile_cache.CACHE_ENV: str(cache.parent)}
+    child = subprocess.Popen(
+        [sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=env, start_new_session=True
+    )
+    try:
+        for _ in range(2400):  # up to 2 min to reach the compile on a loaded host
+            if gcc_pid.exists() or child.poll() is not None:
+                break
+            time.sleep(0.05)
+        signalled = time.monotonic()
+        os.kill(child.pid, signum)
+        try:
+            status = child.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            return time.monotonic() - signalled, None, ""
+        stopped = time.monotonic() - signalled
+        with pytest.raises(ProcessLookupError):  # reaped, not left running on
+            os.kill(int(gcc_pid.read_text()), 0)
+        return stopped, status, child.stdout.read() if child.stdout else ""
+    finally:
+        for group in (child.pid, int(gcc_pid.read_text()) if gcc_pid.exists() else None):
+            if group is not None:  # before the change: the child and the sleeping stand-in, still there
+                with contextlib.suppress(ProcessLookupError, PermissionError):
+                    os.killpg(group, signal.SIGKILL)
+        child.wait()
+
+
+def test_a_compile_ends_on_sigterm_at_once_not_when_gcc_returns(cache, tmp_path):
+    """CasADi ran gcc in system(): a SIGTERM's handler ran only once gcc returned, so a worker a sweep's
+    stop ended while it compiled lived on up to 8 s (CMPC's NLP), the driver waiting for it. gcc now runs in a
+    process group of its own that the compile stops: the process ends by SIGTERM at once, its files gone."""
+    seconds, status, _ = stop_a_slow_compile(cache, tmp_path, signal.SIGTERM)
+    assert status == -signal.SIGTERM and seconds < 10
+    assert suffixes(cache) == []
+
+
+def test_sigint_to_the_compiling_process_alone_interrupts_it(cache, tmp_path, sigint_as_at_a_terminal):
+    """system() ignores SIGINT in its caller while gcc runs: `kill -INT <pid>` of the compiling process
+    alone (a terminal's Ctrl-C reaches gcc's process group too) was lost, and the compile ran on. Now it is
+    a KeyboardInterrupt at once, gcc stopped and the compile's files gone."""
+    seconds, status, out = stop_a_slow_compile(cache, tmp_path, signal.SIGINT)
+    assert (status, out.split()) == (0, ["KeyboardInterrupt"]) and seconds < 10
+    assert suffixes(cache) == []
+
+
+@needs_gcc
+def test_the_library_is_the_one_casadis_own_compile_makes(cache, monkeypatch, tmp_path):
+    """gcc runs here with the arguments CasADi's "shell" plugin gives it: the library is byte for byte the
+    one CasADi makes of the same NLP with the same names (jit_name and library name hold the tag)."""
+    compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+    (ours,) = cache.glob("*.so")
+    tag = ours.name.split(".")[1]
+    own = tmp_path / "casadi"
+    own.mkdir()
+    monkeypatch.chdir(own)  # CasADi writes the source into the working directory
+    cc = compile_cache.compiler()
+    assert cc is not None
+    jit_options = {"compiler": cc.path, "linker": cc.path, "flags": list(cc.flags), "directory": f"{own}/"}
+    jit_options |= {"name": ours.stem, "temp_suffix": False, "cleanup": False}
+    jit = {"jit": True, "compiler": "shell", "jit_name": f"crowdmpc_jit_{tag}", "jit_temp_suffix": False}
+    ca.nlpsol("s", "ipopt", small_nlp(), IPOPT | jit | {"jit_options": jit_options})
+    assert (own / ours.name).read_bytes() == ours.read_bytes()
 
 
 def test_a_compile_leaves_a_programs_own_sigterm_handler(cache, monkeypatch, tmp_path):
