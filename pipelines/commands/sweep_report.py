@@ -48,10 +48,12 @@ def recorded_plan(cfg: RunConfig, config: SweepConfig) -> SweepConfig:
     meta = read_sweep_file(path)
     recorded = meta.get("experiment")
     if recorded is not None and recorded != config.experiment.name:
+        from pipelines.experiments.cells import experiment_option
+
         raise PipelineError(
             f"--report-only: {config.out} holds a sweep of experiment {recorded!r}, not "
             f"{config.experiment.name!r} (its records would be tabulated as that experiment's methods); "
-            f"give --experiment {recorded}"
+            + experiment_option(recorded)
         )
     # the sweep's own runs: a line --reuse copied is another experiment's (pipelines.experiments.reuse)
     runs = [run for run in meta.get("runs", []) if isinstance(run, dict) and not is_reused(run)]

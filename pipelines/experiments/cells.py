@@ -375,3 +375,15 @@ def get_experiment(name: str) -> Experiment:
     if name not in EXPERIMENTS:
         raise PipelineError(f"unknown experiment {name!r}; choose from {sorted(EXPERIMENTS)}")
     return EXPERIMENTS[name]
+
+
+def experiment_option(name: str) -> str:
+    """What a line refusing a sweep of experiment ``name`` tells to type: ``give --experiment NAME``, or, for
+    an ``Experiment`` swept from Python (docs/examples/own_experiment.py), whose name no --experiment takes
+    (the advice was refused in turn), how its report is written."""
+    if name in EXPERIMENTS:
+        return f"give --experiment {name}"
+    return (
+        f"{name!r} is no --experiment but an Experiment swept from Python: "
+        "pipelines.experiments.report.write_report writes its report (docs/examples/own_experiment.py)"
+    )

@@ -548,6 +548,25 @@ def test_report_only_tabulates_the_sweep_that_is_there_or_refuses(tmp_path, caps
         assert (out / TABLE_MD).read_text() == table  # left as it was
 
 
+def test_report_only_of_an_experiment_swept_from_python_names_no_experiment_option(tmp_path, capsys):
+    """A folder of docs/examples/own_experiment.py: --report-only advised '--experiment sensed_margins', which
+    argparse then refused (no such choice); it now says how such a sweep's report is written."""
+    from pipelines.experiments.cells import Experiment
+    from pipelines.loop.controllers import ControllerSpec
+
+    mine = Experiment(
+        name="mine", title="ORCA alone", methods=(("ORCA", ControllerSpec("orca")),), humans=(1,)
+    )
+    out = tmp_path / "sweep"
+    run_sweep(SweepConfig(mine, out, 1, n_robots=1, backend="inline", progress=False))
+    capsys.readouterr()
+    assert main(["sweep", "--report-only", "--no-progress", "--experiment", "table2", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{out} holds a sweep of experiment 'mine', not 'table2'" in err[0], err
+    assert "--experiment mine" not in err[0] and "'mine' is no --experiment" in err[0]
+    assert "pipelines.experiments.report.write_report" in err[0]
+
+
 # ----------------------------------------------------------------------------------------------------------
 # A broken zoo entry: refused by the driver in simulate's line, before any worker starts (and in --dry-run)
 # ----------------------------------------------------------------------------------------------------------
