@@ -141,9 +141,7 @@ def recorded_entries(path: Path, run: dict[str, Any], index: int) -> list[Entry]
     if is_lost(run):  # run_lines.lost_runs: the run's line was gone when a later run began
         raise ConfigError(f"{where} was lost from the file ({run['lost']}): its config is unknown")
     if not isinstance(values, dict):
-        raise ConfigError(
-            f"{where} records no config (a sweep from before configs were kept); rerun it from its options"
-        )
+        raise ConfigError(f"{where} records no config{_why_no_config(path)}")
     source = Source("file", where)
     own = _profile_values(values, run)
     entries: list[Entry] = []
@@ -281,3 +279,23 @@ def _plain(value: Any) -> str:
     """A recorded value inside a comment: one short line (a line break in it would end the comment, and what
     follows would be read as TOML)."""
     return " ".join(str(value).split())[:80]
+
+
+def _why_no_config(path: Path) -> str:
+    """Why a run line of ``path`` holds no config, and what reruns it: a sweep's run line has held it since
+    configs were kept, but ``run_sweep`` called from Python records none (its ``SweepConfig`` has no
+    ``run_config``), and its experiment may be one no --experiment names (docs/examples/own_experiment.py),
+    where "rerun it from its options" sent the reader to options that cannot name it."""
+    from pipelines.experiments.cells import EXPERIMENTS
+    from pipelines.experiments.log import read_sweep_file
+
+    experiment = read_sweep_file(path).get("experiment")
+    if isinstance(experiment, str) and experiment not in EXPERIMENTS:
+        return (
+            f": its experiment {experiment!r} is no --experiment but an Experiment swept from Python, with "
+            "run_sweep, which records no config; rerun it with the code that swept it"
+        )
+    return (
+        " (a sweep from before configs were kept, or one swept from Python with run_sweep, which records "
+        "none); rerun it from its options"
+    )

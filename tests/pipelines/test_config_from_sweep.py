@@ -55,7 +55,10 @@ def test_a_sweep_reruns_from_what_its_directory_records(tmp_path, capsys):
         (["--run", "2"], "--run goes with --from-sweep DIR"),
         (["--from-sweep", "{sweep}", "--run", "3"], "records runs 1..1"),
         (["--from-sweep", "{sweep}", "--set", "mpc.horizon=5"], "no --config or --set beside it"),
-        (["--from-sweep", "{old}"], "records no config (a sweep from before configs were kept)"),
+        (
+            ["--from-sweep", "{old}"],
+            "records no config (a sweep from before configs were kept, or one swept from",
+        ),
         (["--from-sweep", "{damaged}"], "unknown config section 'mcp'; the file is damaged"),
         (["--from-sweep", "{flat}"], "config section 'mpc' is not a table of keys; the file is damaged"),
         (["--from-sweep", "{sweep}/sweep.json"], "sweep.json: that is a sweep's file; give its folder, "),
@@ -81,6 +84,21 @@ def test_what_it_refuses(tmp_path, capsys, args, message):
     assert main(["config", "show", *(a.format(**names) for a in args)]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
+
+
+def test_a_sweep_of_an_experiment_swept_from_python_is_not_called_old(tmp_path, capsys):
+    """docs/examples/own_experiment.py's folder (run_sweep records no config): the refusal said it was a
+    sweep from before configs were kept and to rerun it from its options, none of which names its
+    experiment."""
+    run = {"started": "2026-12-07T18:40:22+00:00", "version": "0.1.0", "episodes_per_cell": 1}
+    (tmp_path / SWEEP_FILE).write_text(json.dumps({"experiment": "sensed_margins", "runs": [run]}))
+    assert main(["config", "show", "--from-sweep", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert (
+        len(err) == 1
+        and "(run 1) records no config: its experiment 'sensed_margins' is no --experiment" in err[0]
+    )
+    assert "from before configs were kept" not in err[0] and "rerun it with the code that swept it" in err[0]
 
 
 def test_recorded_values_stay_inside_their_comment(tmp_path, capsys):
