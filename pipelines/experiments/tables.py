@@ -104,6 +104,19 @@ def _best(values: Sequence[float], higher_is_better: bool) -> set[int]:
     return winners if len(winners) < len(finite) else set()
 
 
+def _crossings(counts: Sequence[int]) -> str:
+    """The crossings of cells of ``counts`` episodes: episode i is ``SCENARIOS[i % 2]``, so an odd count is
+    not half and half (one episode a cell is the circle alone, which "half circle and half perpendicular"
+    said it was not)."""
+    if all(n % 2 == 0 for n in counts):
+        return f"half {SCENARIOS[0]} and half {SCENARIOS[1]} crossing"
+    if list(counts) == [1]:
+        return f"the {SCENARIOS[0]} crossing"
+    if len(counts) == 1:
+        return f"{(counts[0] + 1) // 2} {SCENARIOS[0]} and {counts[0] // 2} {SCENARIOS[1]} crossings"
+    return f"{SCENARIOS[0]} and {SCENARIOS[1]} crossings in turn, the {SCENARIOS[0]} first"
+
+
 def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_line: str) -> str:
     """The paragraph above the table: how many episodes, which predictors and conventions, how to read it."""
     # in the columns' order (--predictors'), each once: sorted, the words and the columns read differently
@@ -113,8 +126,8 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
     notes = [
         f"## {experiment.title}",
         "",
-        f"Ours: {per_cell} episode{'' if per_cell == '1' else 's'} per cell, "
-        "half circle and half perpendicular crossing, the same seeds in every cell; "
+        f"Ours: {per_cell} episode{'' if per_cell == '1' else 's'} per cell, {_crossings(counts)}, "
+        "the same seeds in every cell; "
         f"predictor{'s' if len(predictors) > 1 else ''} {', '.join(predictors)}. Rates with their 95% Wilson "
         "interval in brackets; travel time over successful episodes ± the 95% interval of its mean "
         "(Student's t). Bold: the better method at each number of pedestrians, in the paper's four rows "

@@ -1060,7 +1060,10 @@ def test_the_note_gives_the_range_of_episodes_per_cell():
     table2 = get_experiment("table2")
     episodes = {("CMPC", 5): [(True, 18.0, False, False)] * 4, ("DMPC", 5): [(True, 18.0, False, False)] * 3}
     markdown = markdown_table(table2, summarize(table2, table2.cells(), _records(table2, episodes)))
-    assert "\nOurs: 3\u20134 episodes per cell, half circle and half perpendicular crossing," in markdown
+    assert (
+        "\nOurs: 3\u20134 episodes per cell, circle and perpendicular crossings in turn, the circle first,"
+        in (markdown)
+    )
 
 
 def test_the_papers_figures_stand_beside_its_own_team_size_only(tmp_path):
@@ -1476,7 +1479,25 @@ def test_the_note_says_one_episode_per_cell_in_the_singular():
     table2 = get_experiment("table2")
     episodes = {("CMPC", 5): [(True, 18.0, False, False)], ("DMPC", 5): [(True, 18.0, False, False)]}
     markdown = markdown_table(table2, summarize(table2, table2.cells(), _records(table2, episodes)))
-    assert "\nOurs: 1 episode per cell, half circle" in markdown
+    assert "\nOurs: 1 episode per cell, the circle crossing, the same seeds" in markdown
+
+
+@pytest.mark.parametrize(
+    ("count", "words"),
+    [
+        (1, "the circle crossing"),
+        (2, "half circle and half perpendicular crossing"),
+        (3, "2 circle and 1 perpendicular crossings"),
+        (4, "half circle and half perpendicular crossing"),
+    ],
+)
+def test_the_note_says_which_crossings_the_episodes_are(count, words):
+    """Episode i of a cell is circle for even i, perpendicular for odd: the note said "half circle and half
+    perpendicular crossing" of every count, of one episode (the circle alone) and of three (two circles)."""
+    table2 = get_experiment("table2")
+    episodes = {(m, 5): [(True, 18.0, False, False)] * count for m in ("CMPC", "DMPC")}
+    markdown = markdown_table(table2, summarize(table2, table2.cells(), _records(table2, episodes)))
+    assert f" per cell, {words}, the same seeds in every cell;" in markdown
 
 
 def test_the_help_names_the_experiments_that_refuse_margins_and_conventions(capsys):
