@@ -191,16 +191,21 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
     return fig, draw, view
 
 
-def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) -> AnimationFacts:
+def animate_recording(
+    rec: Recording, out: str | Path, *, speed: float = 1.0, progress: bool | None = None
+) -> AnimationFacts:
     """The episode as a GIF (Pillow) or, for a ``.mp4`` name, an MP4 (needs ffmpeg).
 
     One frame per recorded state, played at ``speed`` times simulated time; an episode of more than
     ``MAX_FRAMES`` states gets every k-th (and its last), played k times faster, so that it keeps its length
     in seconds. A frame is shown no longer than ``MAX_FRAME_S`` (a GIF's longest) and no shorter than
     ``MIN_FRAME_S`` (a GIF's: ``MIN_GIF_FRAME_S``, in whole centiseconds): an episode of longer (shorter)
-    steps plays faster (slower) than asked, which the returned ``AnimationFacts`` say.
+    steps plays faster (slower) than asked, which the returned ``AnimationFacts`` say. ``progress``: a bar
+    of the frames drawn (None: on a terminal only), as drawing them takes seconds to a minute.
     """
     from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
+
+    from predictors.progress import progress_bar
 
     out = Path(out)
     check_animation_path(out)
@@ -225,5 +230,12 @@ def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) ->
         if gif
         else FFMpegWriter(fps=fps)  # type: ignore[arg-type]
     )
-    save_figure(out, lambda name: animation.save(name, writer=writer, dpi=80))
+    with progress_bar(
+        total=len(rows), desc=f"animating {out.name}", unit="frame", leave=False, show=progress
+    ) as bar:
+
+        def drawn(_frame: int, _total: int) -> None:
+            bar.update()
+
+        save_figure(out, lambda name: animation.save(name, writer=writer, dpi=80, progress_callback=drawn))
     return AnimationFacts(len(rows), every, frame_s, asked_s, least_s)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import sys
 
 import numpy as np
 import pytest
@@ -232,6 +233,18 @@ def test_a_long_episode_is_animated_in_at_most_max_frames(runs, tmp_path, capsys
     assert "(4 frames, one state in 3)" in capsys.readouterr().out
     with Image.open(gif) as animation:
         assert animation.n_frames == 4 and animation.info["duration"] == 1200
+
+
+def test_an_animation_shows_a_bar_of_its_frames_on_a_terminal(runs, tmp_path, capsys, monkeypatch):
+    """--animate drew for 20 s (a 50-step demo episode; a minute at the time limit) without a sign of life,
+    where every other long step of the commands shows a bar on a terminal; off a terminal it draws none."""
+    gif = tmp_path / "a.gif"
+    assert main(["review", str(runs[0].path), "--animate", str(gif)]) == 0
+    assert "animating" not in capsys.readouterr().err  # captured: no terminal
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    assert main(["review", str(runs[0].path), "--animate", str(gif)]) == 0
+    err = capsys.readouterr().err
+    assert "animating a.gif" in err and "9/9" in err, err
 
 
 def test_unreadable_input_is_a_user_error(tmp_path, capsys):
