@@ -29,7 +29,11 @@ def _private_user_zoo(tmp_path_factory, monkeypatch):
     monkeypatch.delenv(CONTROLLER_PLUGINS_ENV, raising=False)
     yield
     # monkeypatch restores only what it changed: a variable absent before the test, and set by its --plugin,
-    # stayed, and a later test's monkeypatch.undo() put it back mid-test (a plugin of a gone tmp_path)
+    # stayed, and a later test's monkeypatch.undo() put it back mid-test (a plugin of a gone tmp_path). Its
+    # undo first: a test that deleted the variable its --plugin set (monkeypatch.delenv, as a new process) had
+    # it set again by the undo that came after this clean-up, for the rest of the session
+    # (tests/test_plugin_env_isolation.py).
+    monkeypatch.undo()
     for variable in (PLUGINS_ENV, CONTROLLER_PLUGINS_ENV):
         os.environ.pop(variable, None)
 
