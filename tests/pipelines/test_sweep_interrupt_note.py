@@ -22,7 +22,9 @@ def test_a_sweep_interrupted_after_its_last_episode_says_nothing_is_left(
 ):
     """A Ctrl-C that came after "4/4 episodes recorded" printed "rerun the same command to resume"."""
     outcome = SweepOutcome(planned=4, already_done=0, ran=done, backend="process", interrupted=True)
-    monkeypatch.setattr("pipelines.experiments.sweep.run_sweep", lambda config, records=None: outcome)
+    monkeypatch.setattr(
+        "pipelines.experiments.sweep.run_sweep", lambda config, records=None, weights=None: outcome
+    )
     monkeypatch.setattr(sweep_report, "_recorded", lambda config: done)
     config = SimpleNamespace(experiment=SimpleNamespace(name="table2"), out=tmp_path, tasks=lambda: [])
     assert sweep_report.run_cells(config) == sweep_report.INTERRUPTED  # type: ignore[arg-type]
@@ -37,7 +39,9 @@ def test_a_sweep_complete_after_its_retries_says_its_errors_are_recorded_since(t
         '{"key": "a", "error": "worker died"}\n{"key": "z", "error": "x"}\n'
     )
     outcome = SweepOutcome(planned=2, already_done=1, ran=1, backend="process")
-    monkeypatch.setattr("pipelines.experiments.sweep.run_sweep", lambda config, records=None: outcome)
+    monkeypatch.setattr(
+        "pipelines.experiments.sweep.run_sweep", lambda config, records=None, weights=None: outcome
+    )
     tasks = [SimpleNamespace(key="a"), SimpleNamespace(key="b")]  # "z": another plan's
     config = SimpleNamespace(experiment=SimpleNamespace(name="table2"), out=tmp_path, tasks=lambda: tasks)
     assert sweep_report.run_cells(config) == 0  # type: ignore[arg-type]
