@@ -104,7 +104,7 @@ def parse_document(path: Path, data: bytes, document_format: str, what: str) -> 
     try:
         document = json.loads(data.decode("utf-8"), object_pairs_hook=unique_keys)
     except DuplicateKey as exc:
-        raise PredictorError(f"{path}: {exc}; give each key once (json would keep the last)") from None
+        raise PredictorError(f"{path}: {exc}") from None
     except UnicodeDecodeError:
         raise PredictorError(f"{path}: not valid JSON (not UTF-8 text)") from None
     except ValueError as exc:  # JSONDecodeError, or an integer literal of more than 4300 digits

@@ -24,10 +24,14 @@ class PredictorError(ValueError):
 
 
 class DuplicateKey(PredictorError):
-    """A JSON object that names a key twice (``unique_keys``)."""
+    """A JSON object that names a key twice (``unique_keys``). Its message carries the advice, so that every
+    file read with ``unique_keys`` says the same (the readers prefix the file's path or option)."""
 
     def __init__(self, key: str):
-        super().__init__(f"the key {short_key(key)} appears twice in one object")
+        super().__init__(
+            f"the key {short_key(key)} appears twice in one object; "
+            "give each key once (json would keep the last)"
+        )
         self.key = key
 
 

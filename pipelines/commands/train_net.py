@@ -161,7 +161,7 @@ def parse_net_config(text: str) -> dict[str, Any]:
     try:  # a key typed twice: json kept the last without a word (the 64 of hidden_dim 32 then 64 trained)
         values = json.loads(text, object_pairs_hook=unique_keys)
     except DuplicateKey as exc:
-        raise PipelineError(f"--net-config: {exc}; give each key once (json would keep the last)") from None
+        raise PipelineError(f"--net-config: {exc}") from None
     except ValueError as exc:  # JSONDecodeError, or an integer literal of more than 4300 digits
         raise PipelineError(f"--net-config: not valid JSON ({exc})") from None
     except RecursionError:

@@ -113,9 +113,7 @@ def read_run_settings(out: Path) -> dict[str, Any] | None:
     try:
         recorded = json.loads(path.read_text(encoding="utf-8"), object_pairs_hook=unique_keys)
     except DuplicateKey as exc:
-        raise PipelineError(
-            f"--resume: {path}: {exc}; give each key once (json would keep the last)"
-        ) from None
+        raise PipelineError(f"--resume: {path}: {exc}") from None
     except (OSError, ValueError, RecursionError) as exc:
         raise PipelineError(f"--resume: {path} is not readable JSON ({exc})") from None
     if not isinstance(recorded, dict):

@@ -255,7 +255,7 @@ def _add(args: argparse.Namespace) -> int:
     try:  # a key given twice is refused, as in every JSON file a user edits
         summary = json.loads(metrics_path.read_text(encoding="utf-8"), object_pairs_hook=unique_keys)
     except DuplicateKey as exc:
-        raise PipelineError(f"{metrics_path}: {exc}; give each key once (json would keep the last)") from None
+        raise PipelineError(f"{metrics_path}: {exc}") from None
     except (ValueError, RecursionError) as exc:  # JSONDecodeError, not UTF-8, nested too deeply
         raise PipelineError(f"{metrics_path}: not valid JSON ({exc})") from None
     if not isinstance(summary, dict):

@@ -77,3 +77,16 @@ def test_a_written_checkpoint_config_reads_back_with_each_key_once(tmp_path):
     _, config = save_checkpoint(net, model="social_lstm", name="net", out_dir=tmp_path, obs_len=9)
     document = parse_document(config, config.read_bytes(), "crowdmpc-predictor", "crowdmpc predictor config")
     assert document["name"] == "net"
+
+
+def test_the_advice_is_the_errors_own_so_every_reader_gives_it_alike():
+    """The advice was written by each of the four readers that catch DuplicateKey (checkpoint's documents,
+    train_settings.json, --net-config, a zoo metrics file); it is now the error's, their lines as before."""
+    from pipelines.commands.train_net import parse_net_config
+    from predictors.errors import DuplicateKey
+
+    advice = "appears twice in one object; give each key once (json would keep the last)"
+    assert str(DuplicateKey("seed")) == f"the key 'seed' {advice}"
+    with pytest.raises(PipelineError) as exc:
+        parse_net_config('{"hidden_dim": 32, "hidden_dim": 64}')
+    assert str(exc.value) == f"--net-config: the key 'hidden_dim' {advice}"
