@@ -31,6 +31,7 @@ from crowdsim.env import EnvConfig
 from crowdsim.orca import orca_velocities, preferred_velocities
 from predictors.base import check_rollout_inputs
 from predictors.errors import NoCasadiTwin, PredictorError
+from predictors.text_table import counted
 
 if TYPE_CHECKING:
     import casadi as ca
@@ -86,7 +87,8 @@ class OrcaOracle:
         if history.shape[1] != m + n or not np.allclose(history[-1], now, atol=1e-9):
             raise PredictorError(
                 "the ORCA oracle got a history whose current positions are not those of the observation it "
-                f"was told ({history.shape[1]} agents, {m} robots + {n} humans): call observe(obs) every step"
+                f"was told ({history.shape[1]} agents, {counted(m, 'robot')} + {counted(n, 'human')}): call "
+                "observe(obs) every step"
             )
         humans = np.asarray(humans, dtype=int)
         if humans.size and humans.min() < m:

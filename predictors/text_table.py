@@ -1,6 +1,7 @@
 """The plain-text tables the commands print (``data stats``, ``evaluate``; ``zoo list``, ``zoo
 calibrations``, ``review``'s): a name column aligned left, number columns aligned right (or every column
-left, its lines without trailing blanks), a rule of dashes under the header."""
+left, its lines without trailing blanks), a rule of dashes under the header; and the counts their lines and
+labels give (``counted``)."""
 
 from __future__ import annotations
 
@@ -22,3 +23,10 @@ def aligned_lines(
         )
 
     return [line(header), "  ".join("-" * w for w in widths), *map(line, rows)]
+
+
+def counted(n: int, noun: str) -> str:
+    """ "1 human", "3 humans", "0 robots": export's printout said "1 humans, 1 robots", and so did the notes,
+    refusals and plot labels that count robots and humans, where a run of one robot or one human is
+    allowed."""
+    return f"{n} {noun}{'s' * (n != 1)}"

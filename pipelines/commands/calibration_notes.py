@@ -159,15 +159,16 @@ def calibration_team_note(
     them without a word."""
     from crowdsim.world import PAPER_ROBOTS
     from predictors.conformal import alpha_text
+    from predictors.text_table import counted
 
     block = _planned_block(spec.behind(sensor_range, sensor_tracks), as_read)
     made = block.details.get("humans") if block is not None else None
     if block is None or block.source != "closed-loop" or not isinstance(made, list) or not made:
         return None
     outside = sorted({n for n in humans if not min(made) <= n <= max(made)})
-    differ = ([f"{n_robots} robots"] if n_robots != PAPER_ROBOTS else []) + (
-        [f"{', '.join(map(str, outside))} humans"] if outside else []
-    )
+    # several crowd sizes are "4, 15 humans"; one is counted as such ("1 human")
+    sizes = counted(outside[0], "human") if len(outside) == 1 else f"{', '.join(map(str, outside))} humans"
+    differ = ([counted(n_robots, "robot")] if n_robots != PAPER_ROBOTS else []) + ([sizes] if outside else [])
     if not differ:
         return None
     return (

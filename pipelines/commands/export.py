@@ -13,6 +13,7 @@ from mpc.sizes import MAX_HORIZON  # the MPC's: the CasADi function unrolls H re
 from pipelines.commands import check_outside_the_zoos, check_writable, replace_file
 from pipelines.commands.output_paths import file_output_arg
 from pipelines.errors import PipelineError
+from predictors.text_table import counted
 
 if TYPE_CHECKING:
     from predictors.manifest import ZooEntry
@@ -95,11 +96,6 @@ def _notes(predictor, args: argparse.Namespace, entry: ZooEntry | None) -> list[
             "it; its sampled futures (SocialGANPredictor.sample) stay in torch"
         )
     return notes
-
-
-def _counted(n: int, noun: str) -> str:
-    """ "1 human", "3 humans", "0 robots": the printout said "1 humans, 1 robots"."""
-    return f"{n} {noun}{'s' * (n != 1)}"
 
 
 def _check_replaces_an_export(out: Path) -> None:
@@ -199,8 +195,8 @@ def run(args: argparse.Namespace) -> int:
     _save(function, args.out)
     size = predictor.context_size(args.humans, args.robots)
     print(
-        f"wrote {args.out}: {function.name()} for {_counted(args.humans, 'human')}, "
-        f"{_counted(args.robots, 'robot')}, horizon {args.horizon} (exported in {seconds:.2f} s)"
+        f"wrote {args.out}: {function.name()} for {counted(args.humans, 'human')}, "
+        f"{counted(args.robots, 'robot')}, horizon {args.horizon} (exported in {seconds:.2f} s)"
     )
     if parity is not None:
         from predictors.export.parity import PARITY_TOLERANCE

@@ -26,6 +26,7 @@ from pipelines.commands.idle_choices import (
 from pipelines.commands.output_paths import names_a_folder
 from pipelines.errors import PipelineError
 from pipelines.loop.spec import MPC_CONTROLLERS, is_shipped
+from predictors.text_table import counted
 
 if TYPE_CHECKING:
     from pipelines.commands.simulate_reads import PredictorRead
@@ -313,9 +314,10 @@ def size_note(spec: ControllerSpec, n_humans: int, n_robots: int) -> str | None:
     if horizon <= 12 and horizon * n_humans * n_robots < 4000:
         return None
     return (
-        f"note: an NLP of {n_robots} robots among {n_humans} humans over {horizon} steps is large (here 11 s "
-        "to build and 0.6 s a first step for 12 robots, 50 humans, 8 steps; 2.5 s and 0.9 s for 3, 7 and "
-        "30): steps may pass mpc.time_limit_s, and an interrupt waits for CasADi to return"
+        f"note: an NLP of {counted(n_robots, 'robot')} among {counted(n_humans, 'human')} over {horizon} "
+        "steps is large (here 11 s to build and 0.6 s a first step for 12 robots, 50 humans, 8 steps; 2.5 s "
+        "and 0.9 s for 3, 7 and 30): steps may pass mpc.time_limit_s, and an interrupt waits for CasADi to "
+        "return"
     )
 
 

@@ -11,6 +11,7 @@ from crowdsim.metrics import COLLISION_DISTANCE
 from crowdsim.reaction import reacts
 from crowdsim.world import RADIUS
 from pipelines.whole_files import save_figure
+from predictors.text_table import counted
 
 # The statuses of control steps that the MPC's wall-time budget (mpc.time_limit_s) cut short: the IBR loop
 # stopped at it ("timeout", mpc/cmpc.py, dmpc.py, coupled.py) or a solve ran past it (IPOPT's status, which
@@ -212,8 +213,8 @@ def plot_title(controller: str, episode: EpisodeResult, env_config: EnvConfig) -
     m = episode.metrics
     who = controller + (f" with {episode.predictor}" if episode.predictor else "")
     seed = "" if episode.seed is None else f", seed {episode.seed}"
-    robots = f"{episode.n_robots} robot" + ("s" if episode.n_robots != 1 else "")
-    humans = f"{episode.n_humans} human" + ("s" if episode.n_humans != 1 else "")
+    robots = counted(episode.n_robots, "robot")
+    humans = counted(episode.n_humans, "human")
     replayed = "" if env_config.crowd == "orca" else f", crowd {env_config.crowd}"
     crowd = f"{episode.scenario}, {robots}, {humans}{replayed}{seed}"
     steps = len(episode.robot_positions) - 1

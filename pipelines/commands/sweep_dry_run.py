@@ -20,6 +20,7 @@ def print_plan(
     (``read_recorded``, which refuses what the resume would), and the episodes ``--reuse`` would take."""
     from pipelines.experiments.log import EPISODES_FILE
     from pipelines.experiments.resume_checks import read_recorded
+    from predictors.text_table import counted
 
     out, experiment = Path(config.out), config.experiment
     print(f"{experiment.title}: {len(cells)} cells x {config.episodes_per_cell} episodes = {len(tasks)}")
@@ -35,9 +36,11 @@ def print_plan(
         taken = len(reused(reuse, out, tasks, progress=config.progress).runs_there)
     width = max(22, *(len(cell.method) for cell in cells))  # --vary's labels are longer
     digits = len(str(config.episodes_per_cell))
+    crowds = {cell.key: counted(cell.n_humans, "human") for cell in cells}
+    crowd_width = max(map(len, crowds.values()))  # "1 human" beside "5 humans": the columns stay in line
     for cell in cells:
         column = "" if done is None else f"{done[cell.key]:>{digits}}/{config.episodes_per_cell} recorded  "
-        print(f"  {cell.method:>{width}}  {cell.n_humans} humans  {column}{cell.key}")
+        print(f"  {cell.method:>{width}}  {crowds[cell.key]:<{crowd_width}}  {column}{cell.key}")
     if done is not None:
         total = sum(done.values())
         print(

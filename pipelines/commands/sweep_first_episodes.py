@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError
+from predictors.text_table import counted
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
@@ -56,7 +57,7 @@ def check_first_episodes(tasks: Iterable[EpisodeTask]) -> None:
                 if tried == 1
                 else f"any of its first {tried} {scenario} episodes"
             )
-            where = f"cell {method!r} at {n_humans} humans, crowd {config.crowd}"
+            where = f"cell {method!r} at {counted(n_humans, 'human')}, crowd {config.crowd}"
             gives = (
                 "the recording gives no window" if config.crowd != "orca" else "the humans cannot be placed"
             )

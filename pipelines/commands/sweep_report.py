@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 from pipelines.errors import EPISODES_RAISED, PipelineError
 from pipelines.experiments.cell_columns import FLOATS, CellColumns, Column
 from pipelines.experiments.run_lines import run_number, runs_named
+from predictors.text_table import counted
 
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
@@ -123,7 +124,7 @@ def _note_unrun_cells(cells: tuple[Cell, ...], recorded: set[str]) -> None:
     """Say which planned cells --out holds no episode of (``recorded``: the cells of its planned records):
     the table leaves their columns out, so a value added to --vary (or a crowd size to --humans) and
     reported before it ran vanished without a word."""
-    unrun = [f"{c.method!r} ({c.n_humans} humans)" for c in cells if c.key not in recorded]
+    unrun = [f"{c.method!r} ({counted(c.n_humans, 'human')})" for c in cells if c.key not in recorded]
     if unrun:
         print(
             f"note: --report-only: no episode of {len(unrun)} planned cells, left out of the table: "
@@ -308,7 +309,8 @@ def not_counted_note(cells: tuple[Cell, ...], tasks: list[EpisodeTask], recorded
     timed out had its rates of the quick ones, or no column at all, under "N episodes per cell"."""
     planned = Counter(task.cell.key for task in tasks)
     short = [
-        f"{c.method} at {c.n_humans} humans {planned[c.key] - recorded.get(c.key, 0)} of {planned[c.key]}"
+        f"{c.method} at {counted(c.n_humans, 'human')} "
+        f"{planned[c.key] - recorded.get(c.key, 0)} of {planned[c.key]}"
         for c in cells
         if recorded.get(c.key, 0) < planned.get(c.key, 0)
     ]

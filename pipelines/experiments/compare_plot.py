@@ -8,6 +8,7 @@ from collections.abc import Mapping
 from typing import Any, Final
 
 from pipelines.experiments.plot_style import method_style
+from predictors.text_table import counted
 
 PANELS: Final[tuple[tuple[str, str], ...]] = (
     ("success", "success (pp)"),
@@ -53,10 +54,12 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
     series: dict[str, list[tuple[Any, Mapping[str, Any]]]] = {}
     for g in groups:
         for label, versus in g["versus_first"].items():
-            team = f", {g['robots']} robots" if teams else ""
+            team = f", {counted(g['robots'], 'robot')}" if teams else ""
             name = f"{g['method']}{team}: {label} − {first}"
             if not by_humans:  # the x axis names the method: its teams' points had shared one x, one series
-                name = f"{g['robots']} robots: {label} − {first}" if teams else f"{label} − {first}"
+                name = (
+                    f"{counted(g['robots'], 'robot')}: {label} − {first}" if teams else f"{label} − {first}"
+                )
             series.setdefault(name, []).append((g, versus))
     # One x position per crowd size run (or per method), evenly spaced: a line across 5 and 7 humans read
     # as if 6 had run, and the axis had ticks at 5.5 humans.
@@ -168,6 +171,6 @@ def _ticks(groups: list[Mapping[str, Any]], by_humans: bool) -> dict[Any, str]:
     ticks: dict[Any, str] = {}
     for g in groups:
         robots = sorted({h["robots"] for h in groups if h["method"] == g["method"]})
-        team = ", ".join(str(r) for r in robots)
-        ticks.setdefault(g["method"], f"{g['method']}\n{g['humans']} humans, {team} robots")
+        team = counted(robots[0], "robot") if len(robots) == 1 else f"{', '.join(map(str, robots))} robots"
+        ticks.setdefault(g["method"], f"{g['method']}\n{counted(g['humans'], 'human')}, {team}")
     return ticks

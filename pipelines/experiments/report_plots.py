@@ -26,6 +26,7 @@ from crowdsim.metrics import ADDED_FLAGS, COLLISION_DISTANCE
 from pipelines.experiments.cells import Experiment
 from pipelines.experiments.plot_style import method_style, settings_line, wrap_title
 from pipelines.experiments.summary import CellSummary, Rate
+from predictors.text_table import counted
 
 ROBOT_CONTACT_FLAG: Final[str] = "robot_contact"  # crowdsim.metrics' flag: two robots touched in the episode
 
@@ -332,7 +333,7 @@ def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], out
     if axis == "method":
         fig.set_size_inches(max(FIGSIZE[0], 1.3 + BAR_WIDTH_IN * len(methods)), FIGSIZE[1])
         drawn = _draw_by_method(ax, methods, summaries, outcome)
-        ax.set_xlabel(f"method ({summaries[0].cell.n_humans} humans)")
+        ax.set_xlabel(f"method ({counted(summaries[0].cell.n_humans, 'human')})")
     else:
         size = (lambda s: s.cell.n_humans) if axis == "humans" else (lambda s: s.cell.n_robots)
         lines = _lines(experiment, methods, summaries, axis)

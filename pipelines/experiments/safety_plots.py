@@ -28,6 +28,7 @@ from pipelines.experiments.safety_report import (
     SafetyColumn,
     min_distance_counts,
 )
+from predictors.text_table import counted
 
 if TYPE_CHECKING:
     from pipelines.experiments.cells import Experiment
@@ -165,7 +166,7 @@ def min_distance_hist_figure(experiment: Experiment, summaries: Sequence[SafetyC
         ax.axvline(CONTACT_DISTANCE, color="k", ls=":", lw=1, label=contact)
         ax.axvline(COLLISION_DISTANCE, color="k", ls="--", lw=1, label=threshold)
         ax.set_xlim(0.0, HIST_MAX)
-        ax.set_title(f"{n} humans", fontsize="medium")
+        ax.set_title(counted(n, "human"), fontsize="medium")
         ax.set_xlabel("episode's minimum robot-human distance (m)", fontsize="small")
         ax.set_ylabel("episodes", fontsize="small")
         ax.grid(alpha=0.3)
@@ -307,7 +308,7 @@ def safety_tradeoff_figure(experiment: Experiment, summaries: Sequence[SafetyCol
         ax.axvline(COLLISION_TARGET, color="grey", ls="--", lw=1, label=target)
         ax.set_xlabel(f"collision rate (%), < {COLLISION_DISTANCE:g} m", fontsize="small")
         ax.set_ylabel("success rate (%)", fontsize="small")
-        ax.set_title(f"{n} humans", fontsize="medium")
+        ax.set_title(counted(n, "human"), fontsize="medium")
         ax.grid(alpha=0.3)
         _below(ax, k_columns, title=_coinciding(cells) or None)
     # Shared by every panel: a point at 0 % collisions stood on the left edge, half cut off; success on its

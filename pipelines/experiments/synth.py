@@ -106,6 +106,7 @@ def synthesize(
     """
     from predictors.data.trajnet_scenes import build_scenes, write_ndjson
     from predictors.progress import progress_bar
+    from predictors.text_table import counted
 
     env_config = env_config or EnvConfig()
     n_robots = SYNTH_ROBOTS if with_robots else 0
@@ -134,8 +135,8 @@ def synthesize(
     ]
     if not scenes:
         raise PipelineError(
-            f"no TrajNet++ scene (21 steps) came out of {episodes} episode(s) of {n_humans} humans in "
-            f"{scenario!r}; episodes are too short or too sparse"
+            f"no TrajNet++ scene (21 steps) came out of {episodes} episode(s) of "
+            f"{counted(n_humans, 'human')} in {scenario!r}; episodes are too short or too sparse"
         )
     out_path = Path(out_path)
     written = tracks[write_ndjson(out_path, scenes, tracks)]

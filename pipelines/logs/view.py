@@ -14,6 +14,7 @@ import numpy as np
 from crowdsim.world import DT, RADIUS
 from pipelines.errors import PipelineError
 from pipelines.logs.reader import Recording
+from predictors.text_table import counted
 
 
 @dataclass(frozen=True)
@@ -88,7 +89,7 @@ def _episode_view(rec: Recording) -> EpisodeView:
     dt = float(ep["dt"]) if "dt" in ep else float(np.median(np.diff(times))) if len(times) > 1 else DT
     plans = {p["step"]: np.asarray(p["positions"], dtype=float) for p in rec.data("/mpc/plan")}
     if any(len(plan) != m for plan in plans.values()):
-        raise ValueError(f"a /mpc/plan is not for {m} robots")
+        raise ValueError(f"a /mpc/plan is not for {counted(m, 'robot')}")
     human_positions = np.array([_points(by_step[s]["positions"], n) for s in steps]).reshape(len(steps), n, 2)
     for row, s in enumerate(steps):  # a replayed crowd: the humans not tracked then are not there
         present = by_step[s].get("present")

@@ -27,6 +27,7 @@ from predictors.base import DT as PREDICTOR_DT
 from predictors.base import ObservingPredictor, Predictor
 from predictors.errors import PredictorError
 from predictors.oracle import ORACLE_PREDICTOR
+from predictors.text_table import counted
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
@@ -171,8 +172,8 @@ def check_history(obs: Observation) -> None:
     if history.ndim != 3 or history.shape[1:] != (agents, 2):
         raise PipelineError(
             f"obs.history has shape {history.shape}, expected (L, {agents}, 2): the last L positions of the "
-            f"{obs.n_robots} robots then the {obs.n_humans} humans, in the order of robot_positions and "
-            "human_positions"
+            f"{counted(obs.n_robots, 'robot')} then the {counted(obs.n_humans, 'human')}, in the order of "
+            "robot_positions and human_positions"
         )
     check_positions(obs)  # said as such, not as a history that differs from the positions (NaN differs)
     check_magnitudes(obs)

@@ -245,3 +245,16 @@ def test_another_team_or_crowd_size_than_calibrated_is_noted():
     table2 = get_experiment("table2").with_margins(parse_margins("conformal:0.1"))
     notes = [n for n in method_notes(table2.cells((5, 10))) if "calibrated with 3 robots" in n]
     assert notes == [f"note: methods 'CMPC', 'DMPC': {calibration_team_note(spec, [10], 3)[6:]}"]
+
+
+def test_a_team_of_one_robot_or_a_crowd_of_one_human_is_counted_in_the_singular():
+    """simulate --robots 1 --humans 2 with conformal margins noted "this run has 1 robots and 2 humans"."""
+    from pipelines.commands.calibration_notes import calibration_team_note
+
+    spec = _spec("conformal:0.1")
+    one_robot = calibration_team_note(spec, [2], 1) or ""
+    assert one_robot.endswith("this run has 1 robot and 2 humans: their coverage here is not measured")
+    one_human = calibration_team_note(spec, [1], 3) or ""
+    assert one_human.endswith("this run has 1 human: their coverage here is not measured")
+    several = calibration_team_note(spec, [1, 2], 3) or ""  # sizes listed: "humans" as before
+    assert several.endswith("this run has 1, 2 humans: their coverage here is not measured")
