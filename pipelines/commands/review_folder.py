@@ -3,6 +3,7 @@ then a table and aggregate per set-up, into the review's report (pipelines.comma
 
 from __future__ import annotations
 
+import shlex
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -39,7 +40,7 @@ def read_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[list
     for path in unfinished:
         print(
             f"crowdmpc review: warning: skipping {path}: unfinished (its run was killed or is still "
-            f"writing); `crowdmpc review {path}` reads what it holds",
+            f"writing); `crowdmpc review {shlex.quote(str(path))}` reads what it holds",
             file=sys.stderr,
         )
     runs, unreadable = [], {}

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shlex
 import sys
 import zlib
 from collections import Counter
@@ -102,15 +103,14 @@ def report(
     zoo = ZooChanges() if report_only and log is None else None
     log = read_log(config, cells, tasks, None if zoo is None else zoo.add) if log is None else log
     if report_only and log.held and not log.planned:
-        out = config.out
+        out, held = config.out, log.held
         humans = ",".join(map(str, config.humans or config.experiment.humans))
         methods = ", ".join(label for label, _ in config.experiment.methods)
-        held = log.held
         raise PipelineError(
             f"--report-only: {out / EPISODES_FILE} holds {held} records, none of them of the cells planned "
             f"here (experiment {config.experiment.name}, --humans {humans}, --robots {config.n_robots}, "
             f"--seed {config.seed}, methods {methods}); the report is left as it was: give the options the "
-            f"sweep ran with (`crowdmpc config show --from-sweep {out}` prints them)"
+            f"sweep ran with (`crowdmpc config show --from-sweep {shlex.quote(str(out))}` prints them)"
         )
     if report_only:
         _note_unrun_cells(cells, log.cells)

@@ -16,6 +16,7 @@ says when the recorded workers exceed it.
 from __future__ import annotations
 
 import math
+import shlex
 import textwrap
 from collections.abc import Sequence
 from pathlib import Path
@@ -113,7 +114,7 @@ def ran_beyond_bound(directory: Path, section: str, key: str, value: Any) -> str
         if isinstance(recorded, dict) and recorded.get(key) == value:
             return (
                 f"; {directory} ran with {section}.{key} = {value!r} before that bound: no more of it runs, "
-                f"and `crowdmpc sweep --report-only --out {directory}` still reports it"
+                f"and `crowdmpc sweep --report-only --out {shlex.quote(str(directory))}` still reports it"
             )
     return ""
 
@@ -135,8 +136,8 @@ def recorded_entries(path: Path, run: dict[str, Any], index: int) -> list[Entry]
     if is_reused(run):  # another sweep's run, of another experiment and folder
         raise ConfigError(
             f"{where} is run {run.get('run_there')} of {run[REUSED]}, whose episodes this sweep took with "
-            f"--reuse: `crowdmpc config show --from-sweep {run[REUSED]} --run {run.get('run_there')}` prints "
-            "what it ran"
+            f"--reuse: `crowdmpc config show --from-sweep {shlex.quote(str(run[REUSED]))} --run "
+            f"{run.get('run_there')}` prints what it ran"
         )
     if is_lost(run):  # run_lines.lost_runs: the run's line was gone when a later run began
         raise ConfigError(f"{where} was lost from the file ({run['lost']}): its config is unknown")

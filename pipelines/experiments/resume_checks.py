@@ -7,6 +7,7 @@ predictors, two margin sets or two crowds).
 from __future__ import annotations
 
 import json
+import shlex
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -109,7 +110,8 @@ class ResumeChecks:
         return (
             f"note: {self.out / EPISODES_FILE} holds {self.outside} episode(s) this run does not plan (e.g. "
             f"{self._outside_key}): table.md, cells.csv and episodes.csv report this run's plan only; "
-            f"`crowdmpc config show --from-sweep {self.out} --run N` prints what earlier run N planned"
+            f"`crowdmpc config show --from-sweep {shlex.quote(str(self.out))} --run N` prints what earlier "
+            "run N planned"
         )
 
     def check(self) -> None:
@@ -178,9 +180,11 @@ class ResumeChecks:
         would take, no taking (they are not the episodes the cells plan now)."""
         if self.reused:
             return "they are not episodes of this plan now: run the sweep without --reuse"
-        # a report runs none of these checks: the folder still reports what it holds, which went unsaid
+        # a report runs none of these checks: the folder still reports what it holds, which went unsaid; the
+        # command quoted as a shell needs it, to be pasted as it is (a folder named "my runs")
+        out = shlex.quote(str(self.out))
         return (
-            f"use another --out for {what}, or `crowdmpc sweep --report-only --out {self.out}` to report the "
+            f"use another --out for {what}, or `crowdmpc sweep --report-only --out {out}` to report the "
             "episodes it holds"
         )
 
