@@ -447,10 +447,18 @@ def test_a_stray_file_named_as_crowdmpcs_own_package_beside_a_plugin_shadows_not
         "import mpc.cmpc, pipelines.cli\n"
         "print(mpc.__file__ != 'mpc.py' and mpc.__path__ is not None, pipelines.cli.__name__)\n"
     )
-    # -P: the working folder is not put first on sys.path, as for the `crowdmpc` script and its workers
+    # -P: the working folder is not put first on sys.path, as for the `crowdmpc` script and its workers.
+    # PYTHONPATH as this process has it, but absolute: a relative one (PYTHONPATH=. in the checkout) would
+    # name tmp_path in the child, the user's own choice of putting the stray files first, not crowdmpc's.
+    env = dict(os.environ)
+    if env.get("PYTHONPATH"):
+        env["PYTHONPATH"] = os.pathsep.join(
+            os.path.abspath(p) for p in env["PYTHONPATH"].split(os.pathsep) if p
+        )
     done = subprocess.run(
         [sys.executable, "-P", "-c", code],
         cwd=tmp_path,
+        env=env,
         capture_output=True,
         text=True,
         timeout=120,
