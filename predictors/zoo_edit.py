@@ -59,9 +59,9 @@ def add_entry(
 
     The shipped zoo is read-only: a ``directory`` that is (or lies in) it is refused, and so is a ``name`` it
     has. A ``name`` the zoo has already is refused unless ``replace`` (and so is a name whose files would be
-    the zoo's own, ``ZOO_FILES``), except for the very same entry: that is left as it is (the one object
-    returned as both), unless its files in the zoo were damaged since, which are then written again (an
-    equal, new entry returned).
+    the zoo's own, ``ZOO_FILES``), except for the very same entry: that is left as it is, ``replace`` or
+    not (the one object returned as both), unless its files in the zoo were damaged since, which are then
+    written again (an equal, new entry returned).
     ``shipped=True`` is the maintainers' way to add a model of a shipped kind to the shipped zoo itself
     (``directory`` then defaults to ``checkpoints_dir()``). Parallel adds and removes take turns
     (``zoo_lock``): every one's entry is in the manifest they leave.
@@ -149,18 +149,21 @@ def _new_entry(
 
 
 def _unchanged(previous: ZooEntry | None, entry: ZooEntry, root: Path, which: str, replace: bool) -> bool:
-    """Whether the zoo's entry ``previous`` under ``entry``'s name is ``entry`` itself (nothing to write);
-    PredictorError when it is another one and ``replace`` was not asked for."""
-    if previous is None or replace:
+    """Whether the zoo's entry ``previous`` under ``entry``'s name is ``entry`` itself (nothing to write, with
+    ``replace`` or without); PredictorError when it is another one and ``replace`` was not asked for."""
+    if previous is None:
         return False
     if _stopped_add(previous, entry):
         return False  # written again, to finish it
     if previous == entry:
-        # adding the same thing twice changes nothing, unless the zoo's copy was damaged since: rewrite it
+        # adding the same thing twice changes nothing, --replace or not (replacing it with itself said
+        # "replaced" and rewrote the files), unless the zoo's copy was damaged since: rewrite it
         return all(
             (root / name).is_file() and sha256_file(root / name) == digest
             for name, digest in ((entry.file, entry.sha256), (entry.config, entry.config_sha256))
         )
+    if replace:
+        return False
     # the entry may be the only copy of a model the user trained (or the paper's predictor, in the shipped
     # zoo): never lose it without being asked
     raise PredictorError(_taken(entry.name, root, which, previous, entry))

@@ -311,11 +311,11 @@ def _added_line(entry, previous, args: argparse.Namespace, root: Path) -> str:
     sha = f"sha256 {entry.sha256[:12]}…"
     if previous is None:
         return f"added {entry.name} ({entry.file}, {sha}) to the {which} zoo {root}"
-    if not args.replace and previous is entry:  # add_entry returns the one object when it wrote nothing
+    if previous is entry:  # add_entry returns the one object when it wrote nothing (--replace or not)
         return (
             f"{entry.name} is already in the {which} zoo {root} with these weights ({sha}); nothing changed"
         )
-    if not args.replace and previous == entry:
+    if previous == entry:
         return f"{entry.name}: the {which} zoo's copy in {root} was damaged; wrote it again ({sha})"
     return (
         f"replaced {entry.name} (was sha256 {previous.sha256[:12]}…, model {previous.model}) with "

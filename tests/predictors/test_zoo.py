@@ -550,6 +550,20 @@ def test_adding_a_taken_name_is_refused_unless_replace(shipped, user, pair, caps
     assert set(read_manifest(user)) == {"mine"} and load_predictor("mine").name == "mine"
 
 
+def test_replacing_an_entry_with_the_very_same_files_changes_nothing(shipped, user, pair, capsys):
+    """`zoo add --replace` of the weights already there said "replaced mine (was sha256 f932…) with mine.pt
+    (sha256 f932…)" and wrote them again, where a plain re-add says nothing changed."""
+    assert cli(["zoo", "add", str(pair), "--name", "mine"], capsys)[0] == 0
+    first = read_manifest(user)["mine"]
+    before = snapshot(user)
+    code, out, _ = cli(["zoo", "add", str(pair), "--name", "mine", "--replace"], capsys)
+    assert code == 0 and out == (
+        f"mine is already in the user zoo {user} with these weights (sha256 {first.sha256[:12]}…); "
+        "nothing changed\n"
+    )
+    assert snapshot(user) == before and read_manifest(user)["mine"] == first
+
+
 def test_names_that_differ_only_in_case_are_taken(shipped, user, pair, capsys):
     """On a case-insensitive file system Mine.pt is mine.pt: adding it would overwrite mine's weights."""
     assert cli(["zoo", "add", str(pair), "--name", "mine"], capsys)[0] == 0
