@@ -45,7 +45,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--episodes-per-cell",
         type=int,
         metavar="N",
-        help=f"episodes per cell, half of each scenario (default {PAPER_EPISODES_PER_CELL}, the paper's)",
+        help="episodes per cell, circle and perpendicular crossings in turn, the circle first (even N: half "
+        f"of each) (default {PAPER_EPISODES_PER_CELL}, the paper's)",
     )
     p.add_argument(
         "--workers", type=int, metavar="K", help="parallel workers (default: the CPUs this process may use)"

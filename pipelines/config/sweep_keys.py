@@ -39,7 +39,8 @@ def _experiment_keys() -> tuple[Key, ...]:
             "episodes_per_cell",
             "int",
             PAPER_EPISODES_PER_CELL,
-            "episodes per cell, half of each scenario (the paper's 1000; --episodes-per-cell)",
+            "episodes per cell, circle and perpendicular crossings in turn, the circle first (even: half of "
+            "each; the paper's 1000; --episodes-per-cell)",
         ),
         Key("humans", "ints", None, "crowd sizes (--humans); unset: the experiment's own", [5, 6, 7, 8, 9]),
         Key("seed", "int", 0, "base scenario seed: episode i is seed + i // 2 (--seed)"),

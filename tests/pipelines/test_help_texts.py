@@ -76,3 +76,18 @@ def test_a_help_says_what_its_option_is(path, action):
     said = action.help or ""
     assert not ONLY_RANGE_OR_DEFAULT.match(said), f"`{_id(path, action)}`'s help {said!r} is a range/default"
     assert len(_meaning(said)) >= 2, f"`{_id(path, action)}`'s help {said!r} does not say what it is"
+
+
+def test_the_episodes_per_cell_help_says_which_crossing_each_episode_is():
+    """`sweep --help` and the [sweep] episodes_per_cell key said "half of each scenario": episode i of a cell
+    is SCENARIOS[i % 2], so 1 episode is a circle alone and 3 are two circles and one perpendicular."""
+    from pipelines.config.sweep_keys import sweep_keys
+    from pipelines.experiments.tasks import SCENARIOS
+
+    assert SCENARIOS == ("circle", "perpendicular")  # what the words below say
+    helps = [action.help for path, action in _options() if "--episodes-per-cell" in action.option_strings]
+    note = next(k.note for k in sweep_keys() if k.name == "episodes_per_cell")
+    assert helps
+    for text in [*helps, note]:
+        assert "half of each scenario" not in text
+        assert "circle and perpendicular crossings in turn, the circle first" in text
