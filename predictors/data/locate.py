@@ -218,7 +218,7 @@ def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool | None
     writable_cache_dir("prepared")
     log = log or (lambda msg: print(msg, file=sys.stderr))
     # Held for the whole preparation: two `train` runs started at once on an empty cache each prepared the
-    # same entry (half a minute of CPU apiece); the second now waits and takes the first's.
+    # same entry (40 s of CPU and more apiece); the second now waits and takes the first's.
     with locked(
         _entry_lock(target),
         "prepare the cached data",
@@ -226,7 +226,12 @@ def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool | None
     ):
         if read_manifest(target) is not None:
             return target
-        log(f"preparing {raw} into {target} ({_why_prepare(target)}; about half a minute)")
+        # no time promised ("about half a minute" was not): the machine decides, 41 s of CPU idle, 96-100 s
+        # and minutes of wall time on a loaded one (README.md, Data)
+        log(
+            f"preparing {raw} into {target} ({_why_prepare(target)}; this takes a while, longer on a busy "
+            "machine: the TrajNet++ categorisation's Kalman fits, most of it)"
+        )
         staging = target.with_name(f"{target.name}.{os.getpid()}.tmp")
         _remove_dead_leftovers(target)
         shutil.rmtree(staging, ignore_errors=True)
