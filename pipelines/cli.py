@@ -244,13 +244,33 @@ def _stopped_in_order(argv: list[str] | None) -> int:
             raise
         return quit_closed_stdout()
     except KeyboardInterrupt:  # Ctrl-C or kill before a command runs (importing the commands takes a second)
-        print("crowdmpc: interrupted", file=sys.stderr)
+        print(f"{_early_prog(argv)}: interrupted", file=sys.stderr)
         return stop_status()
     except ImportError as exc:  # that Ctrl-C inside an extension's import (scipy: "initialization failed")
         if interrupt_behind(exc) is None:
             raise
-        print("crowdmpc: interrupted", file=sys.stderr)
+        print(f"{_early_prog(argv)}: interrupted", file=sys.stderr)
         return stop_status()
+
+
+# crowdmpc's own options that take a value (an abbreviation, "--conf F", is one too)
+_VALUED: tuple[str, ...] = ("--plugin", "--config", "--set")
+
+
+def _early_prog(argv: list[str] | None) -> str:
+    """The "crowdmpc COMMAND" of a command line stopped before it was parsed, the command read off the words
+    without the parser (which is what was being imported): a Ctrl-C in the first second said "crowdmpc:
+    interrupted" where a later one names the command. "crowdmpc" where no word before the command's own
+    options names one (``--help``, a typo, a value of --config)."""
+    words = iter(sys.argv[1:] if argv is None else argv)
+    for word in words:
+        if word == "--":
+            break
+        if len(word) > 2 and "=" not in word and any(o.startswith(word) for o in _VALUED):
+            next(words, None)  # its value, which may be a command's name ("--config review")
+        elif not word.startswith("-"):
+            return f"crowdmpc {word}" if word in COMMANDS else "crowdmpc"
+    return "crowdmpc"
 
 
 def _no_working_directory() -> str | None:

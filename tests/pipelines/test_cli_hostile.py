@@ -1143,6 +1143,30 @@ def test_ctrl_c_inside_casadi_outside_a_solve_ends_the_command_as_interrupted(mo
     assert capsys.readouterr().err == "crowdmpc simulate: interrupted\n"
 
 
+@pytest.mark.parametrize(
+    ("argv", "prog"),
+    [
+        (["review", "runs/x"], "crowdmpc review"),
+        (["--plugin", "m:C", "--config=a.toml", "--set", "mpc.w_coll=1e6", "simulate"], "crowdmpc simulate"),
+        (["--config", "review", "sweep", "--out", "x"], "crowdmpc sweep"),  # a file named as a command
+        (["--conf", "review"], "crowdmpc"),  # argparse's abbreviation of --config, and its value
+        (["--help"], "crowdmpc"),
+        (["simulte"], "crowdmpc"),  # a typo: no command
+        (["--", "zoo"], "crowdmpc"),
+    ],
+)
+def test_ctrl_c_while_the_commands_are_imported_names_the_command_given(monkeypatch, capsys, argv, prog):
+    """A Ctrl-C in the first second (the parser's imports) said "crowdmpc: interrupted" where one a moment
+    later says "crowdmpc review: interrupted": the command is read off the words given."""
+
+    def importing(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("pipelines.cli.build_parser", importing)
+    assert main(argv) == 130
+    assert capsys.readouterr().err == f"{prog}: interrupted\n"
+
+
 def test_ctrl_c_while_the_commands_are_imported_ends_as_interrupted(monkeypatch, capsys):
     """Ctrl-C in the first second or two of any command (`crowdmpc sweep ...` importing scipy, torch and
     CasADi to build its parser) printed a KeyboardInterrupt traceback of some library's import, exit 1."""
@@ -1152,7 +1176,7 @@ def test_ctrl_c_while_the_commands_are_imported_ends_as_interrupted(monkeypatch,
 
     monkeypatch.setattr("pipelines.cli.build_parser", importing)
     assert main(["sweep", "--experiment", "baselines", "--out", "x"]) == 130
-    assert capsys.readouterr().err == "crowdmpc: interrupted\n"
+    assert capsys.readouterr().err == "crowdmpc sweep: interrupted\n"
 
     def extension(*args, **kwargs):  # scipy's _highspy, interrupted as it loads (a probe: once in 8)
         try:
@@ -1162,7 +1186,7 @@ def test_ctrl_c_while_the_commands_are_imported_ends_as_interrupted(monkeypatch,
 
     monkeypatch.setattr("pipelines.cli.build_parser", extension)
     assert main(["sweep", "--experiment", "baselines", "--out", "x"]) == 130
-    assert capsys.readouterr().err == "crowdmpc: interrupted\n"
+    assert capsys.readouterr().err == "crowdmpc sweep: interrupted\n"
 
     def broken(*args, **kwargs):  # an import that fails on its own is a bug: its traceback stays
         raise ImportError("no module named x")

@@ -264,7 +264,7 @@ def test_ctrl_c_while_a_plugin_is_imported_is_not_swallowed(capsys):
     """Not reported as the plugin's failure to import: an interrupt, one line, exit 130 (as Ctrl-C anywhere
     before a command runs)."""
     assert main(["--plugin", INTERRUPTS, "zoo", "list"]) == 130
-    assert capsys.readouterr().err == "crowdmpc: interrupted\n"
+    assert capsys.readouterr().err == "crowdmpc zoo: interrupted\n"
 
 
 @pytest.mark.parametrize("plugin", [SIGNALLED, IN_EXEC])
@@ -272,7 +272,7 @@ def test_ctrl_c_while_a_plugin_is_imported_is_not_swallowed(capsys):
 def test_kill_before_a_command_runs_stops_as_ctrl_c_does(name, plugin):
     """`kill` (`timeout`, a closed terminal) in the first second or two, while the commands and plugins are
     imported, ended the process by the signal's default action: no line, where a Ctrl-C then prints
-    "crowdmpc: interrupted"; it is taken as Ctrl-C from the start, with 128 + the signal. And an interrupt
+    "crowdmpc zoo: interrupted"; it is taken as Ctrl-C from the start, with 128 + the signal. And an interrupt
     raised in code run from a string (IN_EXEC; a dataclass's generated methods) ended the process by SIGINT
     once the CLI had exited 143 or 129 (CPython's note of an unhandled KeyboardInterrupt): a shell saw 130."""
     import signal
@@ -288,7 +288,7 @@ def test_kill_before_a_command_runs_stops_as_ctrl_c_does(name, plugin):
         text=True,
         timeout=60,
     )
-    assert (done.returncode, done.stderr) == (128 + getattr(signal, name), "crowdmpc: interrupted\n")
+    assert (done.returncode, done.stderr) == (128 + getattr(signal, name), "crowdmpc zoo: interrupted\n")
 
 
 # ---- 8. a cache directory that cannot be one -----------------------------------------------------------
