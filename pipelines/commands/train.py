@@ -305,12 +305,12 @@ def run(args: argparse.Namespace) -> int:
     evaluated = check_data(files, progress=False if args.no_progress else None)
 
     settings = {**run_settings(args, net_config, name, files), **data_settings(args, files)}
-    if not args.resume:  # said when the run started
-        note_shared_data(files, settings["data_sha256"])
     from pipelines.commands.train_fit import run_training
 
     with one_run_at_a_time(out):  # under the lock: a train into --out may have started or ended since
         name = _check_out(args, out, settings, net_config, loss_typed, recorded)
+        if not args.resume:  # said when the run starts, not above a refusal's one line
+            note_shared_data(files, settings["data_sha256"])
         say_taken(out, args, taken, net_taken, data_taken)
         if args.resume and recorded is not None:
             record_epochs(out, recorded, args.epochs)

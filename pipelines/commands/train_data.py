@@ -169,22 +169,28 @@ def data_hashes(files: dict[str, list[Path]]) -> dict[str, str]:
 
 
 def note_shared_data(files: dict[str, list[Path]], hashes: dict[str, str]) -> None:
-    """A note when a --test file holds the same bytes as a --train or --val file, by name or as a copy: its
-    "test" ADE, which metrics.json and the zoo record as held out, is then on data the net trained on or
-    chose its epoch by. A --val file that is the training file is not noted: small checks do it on purpose,
-    and its metrics are no test's."""
-    seen = {hashes[str(p.resolve())]: (split, p) for split in ("val", "train") for p in files[split]}
-    for path in files["test"]:
-        sha = hashes[str(path.resolve())]
-        if sha not in seen or not path.stat().st_size:  # two empty files are no shared data
-            continue
-        split, first = seen[sha]
-        other = f"--{split}" if first.resolve() == path.resolve() else f"--{split} {first}"
-        print(
-            f"note: --test {path} holds the same data as {other} (sha256 {sha[:12]}…): its test metrics are "
-            "not on held-out data",
-            file=sys.stderr,
-        )
+    """A note when a --val file holds the same bytes as a --train file, or a --test file as a --train or
+    --val file, by name or as a copy: the best epoch is then chosen, and the validation metrics the zoo
+    records measured, on training data; a "test" ADE, which metrics.json and the zoo record as held out, on
+    data the net trained on or chose its epoch by. (A --val that is the training file went unsaid, for the
+    small checks that do it on purpose, though data/README.md said it is noted: a note costs them a line.)"""
+    consequence = {
+        "val": "the best epoch is chosen, and its validation metrics measured, on training data",
+        "test": "its test metrics are not on held-out data",
+    }
+    for split, earlier in (("val", ("train",)), ("test", ("val", "train"))):
+        seen = {hashes[str(p.resolve())]: (s, p) for s in earlier for p in files[s]}
+        for path in files[split]:
+            sha = hashes[str(path.resolve())]
+            if sha not in seen or not path.stat().st_size:  # two empty files are no shared data
+                continue
+            other_split, first = seen[sha]
+            other = f"--{other_split}" if first.resolve() == path.resolve() else f"--{other_split} {first}"
+            print(
+                f"note: --{split} {path} holds the same data as {other} (sha256 {sha[:12]}…): "
+                f"{consequence[split]}",
+                file=sys.stderr,
+            )
 
 
 def check_resumed_data(out: Path, recorded: dict[str, Any] | None, hashes: dict[str, str]) -> None:

@@ -88,9 +88,24 @@ def test_a_held_out_file_with_the_training_content_is_noted(tmp_path, capsys):
     files = {"train": [train], "val": [other], "test": [other]}  # the same file: named once
     note_shared_data(files, data_hashes(files))
     assert capsys.readouterr().err.startswith(f"note: --test {other} holds the same data as --val (sha256 ")
-    files = {"train": [train], "val": [train], "test": []}  # a small check's own choice: no note
-    note_shared_data(files, data_hashes(files))
-    assert capsys.readouterr().err == ""
+
+
+def test_a_validation_file_with_the_training_content_is_noted(tmp_path, capsys):
+    """`train --train a.ndjson --val a.ndjson` said nothing of validating on the training data, where
+    data/README.md says a --val file with a training file's content is noted: its best epoch and the
+    validation metrics the zoo records are the training data's."""
+    train = write_walk_file(tmp_path / "train.ndjson")
+    copy = tmp_path / "copy.ndjson"
+    copy.write_bytes(train.read_bytes())
+    for val, other in ((train, "--train"), (copy, f"--train {train}")):  # the same file, and a copy
+        files = {"train": [train], "val": [val], "test": []}
+        hashes = data_hashes(files)
+        note_shared_data(files, hashes)
+        sha = hashes[str(train.resolve())]
+        assert capsys.readouterr().err == (
+            f"note: --val {val} holds the same data as {other} (sha256 {sha[:12]}…): "
+            "the best epoch is chosen, and its validation metrics measured, on training data\n"
+        )
 
 
 def test_a_resume_refuses_a_data_file_changed_since_the_run_started(tmp_path, capsys, monkeypatch):
