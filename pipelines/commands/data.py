@@ -79,6 +79,9 @@ def _register_prepare(actions) -> None:
         help="seed of the TrajNet++ categorisation: the draws of its Kalman fits, which may change a scene's "
         "type, and of the static-scene acceptance (default 42; not with --no-tags, which draws nothing)",
     )
+    prepare.add_argument(
+        "--no-progress", action="store_true", help="no progress bar (drawn on a terminal only)"
+    )
     prepare.set_defaults(func=run_prepare)
 
 
@@ -182,7 +185,7 @@ def run_prepare(args: argparse.Namespace) -> int:
             categorize_scenes=not args.no_tags,
             seed=seed,
             references=references,
-            progress=sys.stderr.isatty(),
+            progress=False if args.no_progress else None,  # None: a bar on a terminal only
             log=lambda msg: print(msg, flush=True),
         )
     if not args.no_check:  # each check not made, said: ETH's was skipped in silence

@@ -107,6 +107,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--check", action="store_true", help="validate every message against its schema")
     parser.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress bar of a folder's files or an animation's frames (drawn on a terminal only)",
+    )
+    parser.add_argument(
         "--json", type=json_path, metavar="FILE", help="also write the summary as JSON (-: standard output)"
     )
     parser.set_defaults(func=run)
@@ -232,6 +237,7 @@ def _review(args: argparse.Namespace) -> int:
     from pipelines.logs.review import compare_table, format_summary
 
     _check_outputs(args)
+    show = False if args.no_progress else None  # None: a bar on a terminal only
     report: dict[str, Any] = {}
     n_unreadable = 0
     other_run = None
@@ -246,7 +252,7 @@ def _review(args: argparse.Namespace) -> int:
             raise PipelineError(
                 f"{', '.join(single_file_only)} {verb} one .mcap file, not the folder {args.path}{example}"
             )
-        runs, n_unreadable = review_folder(args.path, report, args.check)
+        runs, n_unreadable = review_folder(args.path, report, args.check, show)
     else:
         rec = read_recording(args.path)
         # read before anything is printed: a --compare file that cannot be read is the one line, alone
@@ -285,7 +291,7 @@ def _review(args: argparse.Namespace) -> int:
             else:
                 print(f"plot: {args.plot} ({plot_recording(rec, args.plot, args.times)})")
         if args.animate:
-            facts = animate_recording(rec, args.animate)
+            facts = animate_recording(rec, args.animate, progress=show)
             thinned = f", one state in {facts.every}" if facts.every > 1 else ""
             pace = f"; {facts.pace_note}" if facts.pace_note else ""
             print(f"animation: {args.animate} ({facts.frames} frames{thinned}{pace})")

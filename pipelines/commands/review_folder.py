@@ -23,13 +23,17 @@ if TYPE_CHECKING:
     from pipelines.logs.digest import RunDigest
 
 
-def read_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[list[RunDigest], int]:
+def read_folder(
+    folder: Path, report: dict[str, Any], check: bool, show: bool | None = None
+) -> tuple[list[RunDigest], int]:
     """Every readable recording of ``folder``, digested (``pipelines.logs.digest``: read one at a time, the
-    messages let go), and how many were not readable; a line on stderr for each left out."""
+    messages let go), and how many were not readable; a line on stderr for each left out. ``show``: the bar
+    of the files read (None: on a terminal only; False: --no-progress)."""
     from tqdm import tqdm
 
     from pipelines.logs.digest import digest
     from pipelines.logs.reader import find_recordings, read_recording
+    from predictors.progress import progress_bar
 
     try:
         paths, unfinished = find_recordings(folder)
@@ -45,7 +49,7 @@ def read_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[list
         )
     runs, unreadable = [], {}
     # a bar on a terminal only (disable=None): a sweep's thousands of files take minutes
-    for path in tqdm(paths, desc=f"reading {folder}", unit="file", leave=False, disable=None):
+    for path in progress_bar(paths, desc=f"reading {folder}", unit="file", leave=False, show=show):
         try:
             runs.append(digest(read_recording(path), check))
         except PipelineError as exc:
@@ -63,7 +67,9 @@ def read_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[list
     return runs, len(unreadable)
 
 
-def review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[list[RunDigest], int]:
+def review_folder(
+    folder: Path, report: dict[str, Any], check: bool, show: bool | None = None
+) -> tuple[list[RunDigest], int]:
     """``review DIR``: every readable recording's summary, then a table and aggregate per set-up (a note, not
     a warning, names several: a sweep's cells are so by design), into ``report``; the runs and the number of
     unreadable files."""
@@ -72,7 +78,7 @@ def review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[li
     from pipelines.logs.run_tables import aggregate_table, setups_table
     from pipelines.logs.setups import drop_repeats, group_parts, groups, named_settings, short_names
 
-    runs, n_unreadable = read_folder(folder, report, check)
+    runs, n_unreadable = read_folder(folder, report, check, show)
     warn_failures_only(folder, runs)
     report["runs"] = [run.summary for run in runs]
     setups = groups(runs)

@@ -849,3 +849,23 @@ def test_data_the_disk_refuses_names_out(tmp_path, capsys, command):
         f"crowdmpc data {command}: error: could not write {out.resolve()} (File too large)"
     )
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_prepare_no_progress_draws_no_bar(tmp_path, capsys, monkeypatch):
+    """`data prepare` drew its bars on a terminal with no --no-progress to stop them (README: "Progress bars
+    are drawn on a terminal only (`--no-progress`: none)"); off a terminal it draws none either way."""
+    import predictors.data.prepare as prepare_module
+
+    raw = write_tiny_ewap(tmp_path / "data")
+    asked = []
+
+    def fast(*args, **kwargs):
+        asked.append(kwargs["progress"])
+        return prepare_ewap(*args, **{**kwargs, "categorize_scenes": False})
+
+    monkeypatch.setattr(prepare_module, "prepare_ewap", fast)
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    for k, extra in enumerate(([], ["--no-progress"])):
+        argv = ["data", "prepare", "--raw", str(raw), "--out", str(tmp_path / f"out{k}"), "--no-check"]
+        assert run(capsys, *argv, *extra)[0] == 0
+    assert asked == [None, False]  # None: a bar on a terminal only, as every command's

@@ -247,6 +247,19 @@ def test_an_animation_shows_a_bar_of_its_frames_on_a_terminal(runs, tmp_path, ca
     assert "animating a.gif" in err and "9/9" in err, err
 
 
+def test_no_progress_draws_no_bar_on_a_terminal(runs, tmp_path, capsys, monkeypatch):
+    """review drew its bars (a folder's files, an animation's frames) on a terminal with no --no-progress to
+    stop them, where simulate, sweep and train have one and README says every bar has."""
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    gif = tmp_path / "a.gif"
+    for argv in ([str(runs[0].path.parent)], [str(runs[0].path), "--animate", str(gif)]):
+        assert main(["review", *argv]) == 0
+        assert "\r" in capsys.readouterr().err  # the bar, drawn and cleared (leave=False)
+        assert main(["review", *argv, "--no-progress"]) == 0
+        err = capsys.readouterr().err
+        assert "\r" not in err and "reading" not in err and "animating" not in err, err
+
+
 def test_unreadable_input_is_a_user_error(tmp_path, capsys):
     not_mcap = tmp_path / "x.mcap"
     not_mcap.write_text("hello, not an mcap file")
