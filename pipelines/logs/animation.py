@@ -18,6 +18,7 @@ from pipelines.logs.plots import (
     GOAL_COLOR,
     HUMAN_COLOR,
     has_predictions,
+    ring_radius,
     robot_color,
     sensor_circle,
     sensor_radius,
@@ -134,7 +135,9 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
     robots = [Circle((0, 0), view.radius, fc=robot_color(i), ec="k", lw=0.5, zorder=3) for i in range(m)]
     humans = [Circle((0, 0), view.radius, fill=False, ec=HUMAN_COLOR, lw=1.2, zorder=3) for _ in range(n)]
     sensor = sensor_radius(rec)
-    ranges = [] if sensor is None else [sensor_circle((0, 0), sensor, i) for i in range(m)]
+    # a ring that encloses the whole view at every state is drawn at a bound beyond it (ring_radius)
+    drawn = None if sensor is None else ring_radius(ax, view.robot_positions, sensor)
+    ranges = [] if drawn is None else [sensor_circle((0, 0), drawn, i) for i in range(m)]
     for patch in robots + humans + ranges:
         ax.add_patch(patch)
     trails = [ax.plot([], [], "-", color=robot_color(i), lw=1.0, alpha=0.6)[0] for i in range(m)]

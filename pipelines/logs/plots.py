@@ -126,10 +126,26 @@ def sensor_radius(rec: Recording) -> float | None:
 def draw_sensor_ranges(ax: Any, robot_positions: Any, rows: Sequence[int], radius: float) -> None:
     """Each robot's sensor range at each state of ``rows`` (``robot_positions`` ``(T, M, 2)`` m): a dashed
     circle in its colour (a human outside every circle was not seen then), named once in the legend."""
+    drawn = ring_radius(ax, np.asarray(robot_positions)[list(rows)], radius)
     for k, row in enumerate(rows):
         for i, centre in enumerate(robot_positions[row]):
             label = f"sensor range ({radius:g} m)" if k == 0 and i == 0 else None
-            ax.add_patch(sensor_circle(centre, radius, i, label))
+            ax.add_patch(sensor_circle(centre, drawn, i, label))
+
+
+def ring_radius(ax: Any, centres: Any, radius: float) -> float:
+    """The radius to draw a sensor ring of ``radius`` with around each of ``centres`` (``(..., 2)`` m) in the
+    axes ``ax``, their limits set: ``radius`` itself, unless that is beyond twice the farthest corner of the
+    view from any centre, where every such ring encloses the whole view and shows nothing; then that bound,
+    as invisible. matplotlib dashes the whole circumference: a recording from before the sensor range had a
+    bound (crowdsim.world.SENSOR_RANGE) at 1e6 m took 24 s a plot, at 1e300 m never ended."""
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    corners = np.array([[x0, y0], [x0, y1], [x1, y0], [x1, y1]])
+    points = np.asarray(centres, dtype=float).reshape(-1, 1, 2)
+    far = np.linalg.norm(points - corners, axis=-1)
+    if not far.size or not np.isfinite(far).any():
+        return radius
+    return float(min(radius, 2.0 * np.nanmax(far)))
 
 
 def sensor_circle(centre: Any, radius: float, robot: int, label: str | None = None) -> Any:

@@ -260,6 +260,36 @@ def test_no_progress_draws_no_bar_on_a_terminal(runs, tmp_path, capsys, monkeypa
         assert "\r" not in err and "reading" not in err and "animating" not in err, err
 
 
+@pytest.mark.parametrize("recorded", [3.0, 1e6, 1e300])
+def test_a_sensor_ring_far_beyond_the_view_is_drawn_at_a_bound(runs, monkeypatch, recorded):
+    """A recording from before the 1000 m bound on the sensor range (crowdsim.world.SENSOR_RANGE) drew its
+    dashed ring at the recorded radius, which matplotlib dashes whole: 1e6 m took 24 s a plot, 1e300 m never
+    ended. A ring that encloses the whole view is now drawn at twice the view's farthest corner, as unseen;
+    a ring in view (3 m) is drawn as before, and the legend names the recorded range either way."""
+    from matplotlib.patches import Circle
+
+    from pipelines.logs.animation import animation_figure
+    from pipelines.logs.plots import recording_figure
+
+    monkeypatch.setattr("pipelines.loop.sensing.recorded_sensor_range", lambda config: recorded)
+    rec = read_recording(runs[0].path)
+    fig, drawn = recording_figure(rec)
+    ax = fig.axes[0]
+    rings = [p for p in ax.patches if isinstance(p, Circle) and p.get_linestyle() == "--"]
+    assert len(rings) == 3 * len(drawn)  # robots x snapshots
+    view = max(np.ptp(ax.get_xlim()), np.ptp(ax.get_ylim()))
+    assert (
+        all(r.radius == recorded for r in rings)
+        if recorded == 3.0
+        else all(r.radius < 4 * view for r in rings)
+    )
+    assert f"sensor range ({recorded:g} m)" in {t.get_text() for t in ax.get_legend().get_texts()}
+    fig, _, _ = animation_figure(rec)
+    rings = [p for p in fig.axes[0].patches if isinstance(p, Circle) and p.get_linestyle() == "--"]
+    assert len(rings) == 3 and all(r.radius == min(recorded, rings[0].radius) < 1e3 for r in rings)
+    assert f"sensor range ({recorded:g} m)" in {t.get_text() for t in fig.legends[0].get_texts()}
+
+
 def test_unreadable_input_is_a_user_error(tmp_path, capsys):
     not_mcap = tmp_path / "x.mcap"
     not_mcap.write_text("hello, not an mcap file")
