@@ -147,7 +147,7 @@ def save_calibrations(
         if check is not None:
             check()
         kept = [b for b in read_calibration_file(path) if not any(b.same_key(new) for new in blocks)]
-        _write_blocks(path, [*kept, *blocks])
+        write_blocks(path, [*kept, *blocks])
     return path
 
 
@@ -167,7 +167,7 @@ def undo_calibrations(
         if earlier is None and not kept:  # this run made the file
             path.unlink(missing_ok=True)
         else:
-            _write_blocks(path, [*kept, *back])
+            write_blocks(path, [*kept, *back])
     return path
 
 
@@ -191,7 +191,7 @@ def _behind(sensor_range: float | None, tracks: bool = True) -> str:
     return f" behind a {sensor_range:g} m sensor" + ("" if tracks else " without track lengths")
 
 
-def _write_blocks(path: Path, blocks: list[Calibration]) -> None:
+def write_blocks(path: Path, blocks: list[Calibration]) -> None:
     """Write ``blocks`` as ``path``'s whole content (the caller holds the zoo's lock)."""
     document = {
         "format": CALIBRATIONS_FORMAT,

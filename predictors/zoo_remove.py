@@ -126,3 +126,30 @@ def _entry_to_remove(
             f"{name!r} is a model of the shipped zoo {checkpoints_dir()}, which is read-only"
         )
     raise PredictorError(f"the user zoo {root} has no entry {name!r}; it has {sorted(entries)}")
+
+
+def remove_calibrations(name: str, directory: str | Path | None = None) -> tuple[int, Path]:
+    """Remove every calibration block of predictor ``name`` from the user zoo's calibrations.json
+    (``directory``, else ``user_zoo_dir()``); how many went and the file. ``remove_from_zoo`` keeps them: a
+    zoo add of the same weights plans with them again, and a sweep planned with them then resumes (a
+    recalibration's margins would be refused as changed); this is how a user drops them."""
+    from predictors.calibration_store import calibrations_path, read_calibration_file, write_blocks
+
+    check_name(name)
+    path = calibrations_path(writable_zoo_dir(directory))
+    if not path.is_file():  # nothing to take: the lock would make the zoo's folder
+        return 0, path
+    with zoo_lock(path.parent):  # a calibrate storing its blocks meanwhile keeps them
+        blocks = read_calibration_file(path)
+        kept = [block for block in blocks if block.predictor != name]
+        if len(kept) < len(blocks):
+            write_blocks(path, kept)
+    return len(blocks) - len(kept), path
+
+
+def calibrations_of(name: str, directory: str | Path | None = None) -> tuple[int, Path]:
+    """How many blocks of predictor ``name`` the user zoo's calibrations.json holds, and the file."""
+    from predictors.calibration_store import calibrations_path, read_calibration_file
+
+    path = calibrations_path(writable_zoo_dir(directory))
+    return sum(block.predictor == name for block in read_calibration_file(path)), path

@@ -140,6 +140,12 @@ def _add_and_remove(actions: Any) -> None:
         help="remove only the hidden files an add or remove of NAME stopped on the way left (`verify` names "
         "them); its entry, if it has one, stays",
     )
+    remove.add_argument(
+        "--calibrations",
+        action="store_true",
+        help="remove only NAME's calibration blocks from the user zoo's calibrations.json, which a plain "
+        "remove keeps (a re-add of the same weights uses them again); its entry, if it has one, stays",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -183,6 +189,8 @@ def run(args: argparse.Namespace) -> int:
         return run_calibrations(args.dir, args.predictor, args.plot)
     if args.zoo_command == "add":
         return _add(args)
+    if args.zoo_command == "remove" and args.calibrations:
+        return _remove_calibrations(args)
     if args.zoo_command == "remove" and args.leftovers:
         leftovers, root = zoo_remove.remove_leftovers(args.name, args.dir)
         names = ", ".join(path.name for path in leftovers) or "none"
@@ -200,8 +208,35 @@ def run(args: argparse.Namespace) -> int:
             print(f"{args.name} has no entry in the user zoo {root}; removed its leftover files {names}")
             return 0
         print(f"removed {entry.name} from the user zoo {root}")
+        _kept_calibrations(entry.name, args.dir)
         return 0
     raise PipelineError(f"unknown zoo action {args.zoo_command!r}")
+
+
+def _remove_calibrations(args: argparse.Namespace) -> int:
+    from predictors import zoo_remove
+
+    if args.leftovers:
+        raise PipelineError("--calibrations and --leftovers are two removes: give one at a time")
+    count, path = zoo_remove.remove_calibrations(args.name, args.dir)
+    if not count:
+        raise PipelineError(f"{path} holds no calibration block of {args.name!r}; nothing removed")
+    print(f"removed the {count} calibration block(s) of {args.name} from {path}")
+    return 0
+
+
+def _kept_calibrations(name: str, directory: Path | None) -> None:
+    """Say that the removed entry's calibration blocks stay (listed as "no model"), why, and how they go."""
+    from predictors import zoo_remove
+
+    count, path = zoo_remove.calibrations_of(name, directory)
+    if count:
+        option = "" if directory is None else f" --dir {shlex.quote(str(directory))}"
+        print(
+            f"its {count} calibration block(s) stay in {path} (`zoo calibrations`: weights 'no model'): "
+            f"a zoo add of the same weights plans with them again, and sweeps planned with them resume; "
+            f"`crowdmpc zoo{option} remove --calibrations {shlex.quote(name)}` removes them"
+        )
 
 
 def _report_leftovers(root: Path, directory: Path | None) -> None:

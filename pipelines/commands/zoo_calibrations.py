@@ -217,7 +217,8 @@ def run_calibrations(user_dir: Path | None, predictor: str | None, plot: Path | 
             raise PipelineError(f"--plot {plot}: no calibrations of {predictor!r} to draw in {where}; {how}")
         print(f"no calibrations of {predictor!r} in {where}; {how}")
         return 0
-    print(format_table(table_rows(found, user_dir)))
+    rows = table_rows(found, user_dir)
+    print(format_table(rows))
     if plot is not None:
         blocks = [block for _, block in found]
         figure = plot_margins(blocks, f"Conformal margins of {predictor} (crowdmpc zoo calibrations)")
@@ -231,4 +232,11 @@ def run_calibrations(user_dir: Path | None, predictor: str | None, plot: Path | 
         "crowd, episodes (seeds): the closed-loop episodes the block was made on (crowd sizes, the humans' "
         "profile, robots visible to them or not)"
     )
+    orphans = sorted({row[0] for row in rows[1:] if row[7] == "no model"})
+    if orphans:  # what `zoo remove` left: not in force for any run, kept on purpose
+        print(
+            f"weights no model: blocks of {', '.join(orphans)}, which no zoo holds (`zoo remove` keeps "
+            "them: a zoo add of the same weights plans with them again, and sweeps planned with them "
+            "resume); `crowdmpc zoo remove --calibrations NAME` removes them"
+        )
     return 0

@@ -133,3 +133,52 @@ def test_a_block_of_one_episode_lists_its_seed_once():
     two = dataclasses.replace(shipped, details={**shipped.details, "seeds": [7, 8]})
     assert _episodes(one, {"episodes": "1"}) == "1 (7)"
     assert _episodes(two, {"episodes": "2"}) == "2 (7..8)"
+
+
+def test_a_removed_models_blocks_stay_said_so_and_go_when_asked(tmp_path, capsys):
+    """`zoo remove mine` left mine's blocks in calibrations.json without a word, and `zoo calibrations` then
+    listed them with weights "no model" and nothing on what they were or how they go. They stay (a re-add of
+    the same weights plans with them again, and sweeps planned with them resume), and both commands say so
+    and how they go: `zoo remove --calibrations mine`."""
+    import json
+    import shutil
+    from pathlib import Path
+
+    real = Path(__file__).resolve().parents[2] / "checkpoints"
+    for suffix in (".pt", ".json"):
+        shutil.copyfile(real / f"social_lstm_eth{suffix}", tmp_path / f"mine{suffix}")
+    document = json.loads((tmp_path / "mine.json").read_text())
+    (tmp_path / "mine.json").write_text(json.dumps({**document, "name": "mine"}))
+    (tmp_path / "mine.metrics.json").write_text(json.dumps({"metrics": {"test": {"ade": 0.5}}}))
+    assert main(["zoo", "add", str(tmp_path / "mine.pt")]) == 0
+    from predictors.zoo import locate
+
+    shipped = find_calibration("social_lstm_eth", "closed-loop", 0.1)
+    sha = locate("mine").entry.sha256
+    for alpha in (0.1, 0.05):
+        save_calibration(dataclasses.replace(shipped, predictor="mine", alpha=alpha, predictor_sha256=sha))
+    zoo = tmp_path / "zoo"
+    capsys.readouterr()
+    assert main(["zoo", "remove", "mine"]) == 0
+    assert capsys.readouterr().out.splitlines()[1] == (
+        f"its 2 calibration block(s) stay in {zoo / 'calibrations.json'} (`zoo calibrations`: weights 'no "
+        "model'): a zoo add of the same weights plans with them again, and sweeps planned with them resume; "
+        "`crowdmpc zoo remove --calibrations mine` removes them"
+    )
+    assert main(["zoo", "calibrations", "--predictor", "mine"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert len(out) == 2 + 2 + 2 and all(" no model " in row for row in out[2:4])
+    assert out[-1].startswith("weights no model: blocks of mine, which no zoo holds (`zoo remove` keeps")
+    assert out[-1].endswith("`crowdmpc zoo remove --calibrations NAME` removes them")
+    assert main(["zoo", "add", str(tmp_path / "mine.pt")]) == 0  # the same weights: in force again
+    assert [r[7] for r in calibration_table(None, "mine")[1:]] == ["ok", "ok"]
+    assert main(["zoo", "remove", "mine"]) == 0
+    capsys.readouterr()
+    assert main(["zoo", "remove", "--calibrations", "mine"]) == 0
+    assert (
+        capsys.readouterr().out
+        == f"removed the 2 calibration block(s) of mine from {zoo / 'calibrations.json'}\n"
+    )
+    assert calibration_table(None, "mine")[1:] == [] and len(_rows()) == 10  # the shipped ones untouched
+    assert main(["zoo", "remove", "--calibrations", "mine"]) == 2  # none left: said, not a silent success
+    assert "holds no calibration block of 'mine'; nothing removed" in capsys.readouterr().err
