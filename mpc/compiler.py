@@ -94,11 +94,16 @@ STOP_S: Final[float] = 5.0
 def run_compiler(command: list[str], step: str, check: Check) -> None:
     """Run ``command`` (gcc) in the working directory and wait for it in Python, not in a ``system()`` as
     CasADi's own compile did: that ignored SIGINT in our process (a `kill -INT` of it alone was lost) and
-    held every signal's handler until gcc returned, 8 s for CMPC's NLP. gcc runs in a process group of its
-    own, so that its whole group (cc1, as, ld) is stopped when the compile is: by a KeyboardInterrupt, or
-    ``check`` raising for an ending signal (polled every POLL_S). RuntimeError when gcc fails, in CasADi's
+    held every signal's handler until gcc returned, 8 s for CMPC's NLP. On the main thread gcc runs in a
+    process group of its own, so that its whole group (cc1, as, ld) is stopped when the compile is: by a
+    KeyboardInterrupt, or ``check`` raising for an ending signal (polled every POLL_S); off it, in the
+    caller's group, which a terminal's Ctrl-C reaches. RuntimeError when gcc fails, in CasADi's
     words (``step``: "Compilation" or "Linking"); KeyboardInterrupt when a SIGINT ended gcc itself."""
-    spawn = _Spawn(command)
+    # Off the main thread no signal reaches this code (Python runs handlers in the main thread alone): gcc
+    # stays in the caller's process group there, so that a terminal's Ctrl-C reaches it as before, ends it
+    # and comes back as a KeyboardInterrupt; in a group of its own it ran on after its process had exited.
+    own_group = threading.current_thread() is threading.main_thread()
+    spawn = _Spawn(command, own_group)
     try:
         spawn.start()
         spawn.join()
@@ -109,7 +114,7 @@ def run_compiler(command: list[str], step: str, check: Check) -> None:
     finally:
         process = spawn.cancel()
         if process is not None and process.returncode is None:  # stopped while gcc runs: its group goes
-            _stop_group(process)
+            _stop_group(process, own_group)
     if status in (-signal.SIGINT, 130):
         raise KeyboardInterrupt
     if status != 0:
@@ -117,14 +122,15 @@ def run_compiler(command: list[str], step: str, check: Check) -> None:
 
 
 class _Spawn(threading.Thread):
-    """Starts ``command`` in a process group of its own, in a thread of its own: a KeyboardInterrupt raised
-    in the main thread inside Popen (gcc running, Popen waiting to learn that its exec worked) lost the Popen,
-    and gcc ran on (a Ctrl-C test's stand-in outlived its program). ``cancel`` returns the process, if any:
-    none starts after it."""
+    """Starts ``command`` (in a process group of its own: ``own_group``) in a thread of its own: a
+    KeyboardInterrupt raised in the main thread inside Popen (gcc running, Popen waiting to learn that its
+    exec worked) lost the Popen, and gcc ran on (a Ctrl-C test's stand-in outlived its program). ``cancel``
+    returns the process, if any: none starts after it."""
 
-    def __init__(self, command: list[str]) -> None:
+    def __init__(self, command: list[str], own_group: bool) -> None:
         super().__init__(name="crowdmpc-gcc", daemon=True)
         self.command = command
+        self.own_group = own_group
         self.started: subprocess.Popen | OSError | None = None
         self._lock = threading.Lock()  # held while Popen runs
         self._cancelled = False
@@ -134,7 +140,8 @@ class _Spawn(threading.Thread):
             if self._cancelled:
                 return
             try:
-                self.started = subprocess.Popen(self.command, stdin=subprocess.DEVNULL, process_group=0)
+                group = 0 if self.own_group else None
+                self.started = subprocess.Popen(self.command, stdin=subprocess.DEVNULL, process_group=group)
             except OSError as exc:
                 self.started = exc
 
@@ -154,15 +161,22 @@ def _wait(process: subprocess.Popen, check: Check) -> int:
             check()
 
 
-def _stop_group(process: subprocess.Popen) -> None:
-    """End the process group ``process`` leads (not yet reaped: its id is still the group's) and reap it."""
-    with contextlib.suppress(ProcessLookupError):
-        os.killpg(process.pid, signal.SIGTERM)
+def _stop_group(process: subprocess.Popen, own_group: bool) -> None:
+    """End the process group ``process`` leads (not yet reaped: its id is still the group's), or ``process``
+    alone when it shares its caller's group (``own_group`` false), and reap it."""
+
+    def send(signum: int) -> None:
+        with contextlib.suppress(ProcessLookupError):
+            if own_group:
+                os.killpg(process.pid, signum)
+            else:
+                process.send_signal(signum)
+
+    send(signal.SIGTERM)
     try:
         process.wait(timeout=STOP_S)
     except subprocess.TimeoutExpired:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(process.pid, signal.SIGKILL)
+        send(signal.SIGKILL)
         process.wait()
 
 

@@ -579,6 +579,59 @@ def test_sigint_to_the_compiling_process_alone_interrupts_it(cache, tmp_path, si
     assert suffixes(cache) == []
 
 
+THREADED = """
+import sys, threading, time
+sys.path.insert(0, {root!r})
+from mpc import compile_cache
+from tests.mpc.test_compile_cache import IPOPT, small_nlp
+compile_cache.compiler = lambda: compile_cache.Compiler({gcc!r}, "x", ("-O2",))
+def compile():
+    try:
+        compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+    except KeyboardInterrupt:
+        print("KeyboardInterrupt in the thread", flush=True)
+thread = threading.Thread(target=compile)
+thread.start()
+while thread.is_alive():  # not join(): one a KeyboardInterrupt cuts short takes the thread for ended (3.11)
+    try:
+        time.sleep(0.05)
+    except KeyboardInterrupt:
+        pass
+"""
+
+
+def test_a_ctrl_c_stops_a_compile_off_the_main_thread(cache, tmp_path, sigint_as_at_a_terminal):
+    """A compile off the main thread (DMPC's helper threads build their robots' IPOPT) cannot be stopped
+    from Python, where signals reach the main thread alone: gcc in a process group of its own was out of a
+    terminal's Ctrl-C, ran on after its process had exited and wrote its object file into the cache. There
+    it stays in its caller's group: the Ctrl-C ends it, the thread raises KeyboardInterrupt, files gone."""
+    gcc_pid = tmp_path / "gcc.pid"
+    slow = fake_compiler(tmp_path, f"echo $$ > {gcc_pid}.new; mv {gcc_pid}.new {gcc_pid}; exec sleep 60")
+    script = tmp_path / "child.py"
+    script.write_text(textwrap.dedent(THREADED.format(root=str(ROOT), gcc=slow.path)))
+    env = os.environ | {compile_cache.CACHE_ENV: str(cache.parent)}
+    child = subprocess.Popen(
+        [sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=env, start_new_session=True
+    )
+    try:
+        for _ in range(2400):  # up to 2 min to reach the compile on a loaded host
+            if gcc_pid.exists() or child.poll() is not None:
+                break
+            time.sleep(0.05)
+        os.killpg(child.pid, signal.SIGINT)  # a terminal's Ctrl-C: its foreground process group
+        out, _ = child.communicate(timeout=15)
+        with pytest.raises(ProcessLookupError):  # ended, not running on
+            os.kill(int(gcc_pid.read_text()), 0)
+        assert "KeyboardInterrupt in the thread" in out
+        assert suffixes(cache) == []
+    finally:
+        for pid in (child.pid, int(gcc_pid.read_text()) if gcc_pid.exists() else None):
+            if pid is not None:  # before the change: the sleeping stand-in, still there
+                with contextlib.suppress(ProcessLookupError, PermissionError):
+                    os.kill(pid, signal.SIGKILL)
+        child.wait()
+
+
 @needs_gcc
 def test_the_library_is_the_one_casadis_own_compile_makes(cache, monkeypatch, tmp_path):
     """gcc runs here with the arguments CasADi's "shell" plugin gives it: the library is byte for byte the
