@@ -10,12 +10,14 @@ import shlex
 import shutil
 import signal
 import subprocess
+import sys
+import tempfile
 import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
-from typing import Final
+from typing import IO, Final
 
 COMPILER: Final[str] = "gcc"  # CasADi's "shell" compiler plugin calls it
 # -ffp-contract=off: the compiled NLP must round as CasADi's interpreter does, so that --jit changes the time
@@ -103,18 +105,23 @@ def run_compiler(command: list[str], step: str, check: Check) -> None:
     # stays in the caller's process group there, so that a terminal's Ctrl-C reaches it as before, ends it
     # and comes back as a KeyboardInterrupt; in a group of its own it ran on after its process had exited.
     own_group = threading.current_thread() is threading.main_thread()
-    spawn = _Spawn(command, own_group)
-    try:
-        spawn.start()
-        spawn.join()
-        started = spawn.started
-        if not isinstance(started, subprocess.Popen):  # gcc gone since it was found: the shell's 127 was
-            raise RuntimeError(f'{step} failed. Tried "{shlex.join(command)}": {started}')  # a failed compile
-        status = _wait(started, check)
-    finally:
-        process = spawn.cancel()
-        if process is not None and process.returncode is None:  # stopped while gcc runs: its group goes
-            _stop_group(process, own_group)
+    # gcc's messages go to a file and then to our stderr: a group of its own is a background group of the
+    # terminal, and under `stty tostop` its first warning written there stopped it (SIGTTOU), the compile
+    # waiting for ever (tests/mpc/test_compile_terminal.py); a pipe could fill while nobody reads it
+    with tempfile.TemporaryFile() as output:
+        spawn = _Spawn(command, own_group, output)
+        try:
+            spawn.start()
+            spawn.join()
+            started = spawn.started
+            if not isinstance(started, subprocess.Popen):  # gcc gone since it was found: the shell's 127 was
+                raise RuntimeError(f'{step} failed. Tried "{shlex.join(command)}": {started}')  # failed
+            status = _wait(started, check)
+        finally:
+            process = spawn.cancel()
+            if process is not None and process.returncode is None:  # stopped while gcc runs: its group goes
+                _stop_group(process, own_group)
+        _pass_on(output)
     if status in (-signal.SIGINT, 130):
         raise KeyboardInterrupt
     if status != 0:
@@ -127,10 +134,11 @@ class _Spawn(threading.Thread):
     exec worked) lost the Popen, and gcc ran on (a Ctrl-C test's stand-in outlived its program). ``cancel``
     returns the process, if any: none starts after it."""
 
-    def __init__(self, command: list[str], own_group: bool) -> None:
+    def __init__(self, command: list[str], own_group: bool, output: IO[bytes]) -> None:
         super().__init__(name="crowdmpc-gcc", daemon=True)
         self.command = command
         self.own_group = own_group
+        self.output = output  # gcc's standard output and error
         self.started: subprocess.Popen | OSError | None = None
         self._lock = threading.Lock()  # held while Popen runs
         self._cancelled = False
@@ -141,7 +149,13 @@ class _Spawn(threading.Thread):
                 return
             try:
                 group = 0 if self.own_group else None
-                self.started = subprocess.Popen(self.command, stdin=subprocess.DEVNULL, process_group=group)
+                self.started = subprocess.Popen(
+                    self.command,
+                    stdin=subprocess.DEVNULL,
+                    stdout=self.output,
+                    stderr=subprocess.STDOUT,
+                    process_group=group,
+                )
             except OSError as exc:
                 self.started = exc
 
@@ -159,6 +173,15 @@ def _wait(process: subprocess.Popen, check: Check) -> int:
             return process.wait(timeout=POLL_S)
         except subprocess.TimeoutExpired:
             check()
+
+
+def _pass_on(output: IO[bytes]) -> None:
+    """What gcc printed (its warnings, a failed compile's errors) to our stderr, as when it wrote there."""
+    output.seek(0)
+    text = output.read().decode("utf-8", "replace")
+    if text:
+        sys.stderr.write(text)
+        sys.stderr.flush()
 
 
 def _stop_group(process: subprocess.Popen, own_group: bool) -> None:
