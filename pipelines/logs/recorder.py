@@ -12,6 +12,7 @@ The file is written as ``<name>.part`` and renamed to ``<name>`` when it is fini
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import json
 import os
@@ -180,15 +181,30 @@ class McapRecorder:
             self._stream.close()
             raise self._unwritten(exc) from None
         except BaseException:
-            self._stream.close()
+            self._discard()
             raise
         self._channels: dict[str, tuple[int, MessageSchema]] = {}
         self._schema_ids: dict[tuple[str, bytes], int] = {}  # one schema record shared by the topics using it
         self._closed = False
         self.message_count = 0
         _OPEN.add(self)
-        for name, data in (metadata or {}).items():
-            self.add_metadata(name, data)
+        try:
+            for name, data in (metadata or {}).items():
+                self.add_metadata(name, data)
+        except BaseException:
+            _OPEN.discard(self)
+            self._closed = True
+            self._discard()
+            raise
+
+    def _discard(self) -> None:
+        """Remove the ``.part`` a constructor that did not return had made: nobody holds the recorder to
+        finish it, so a Ctrl-C (or a `kill`, taken as one) in a program's own recording as it began left a
+        ``.part`` of a header (the closed loop holds an interrupt while its observers start). Removed while
+        its lock is held, then closed."""
+        with contextlib.suppress(OSError):
+            self.part_path.unlink()
+        self._stream.close()
 
     # -- context manager: the file is finished however the block ends ----------------------------------------
     def __enter__(self) -> McapRecorder:

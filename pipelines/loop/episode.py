@@ -220,11 +220,12 @@ def run_episode(
                 observer.on_step(obs, out, next_obs)
             obs = next_obs
             interrupt.check()
-
-    traj = env.trajectory()
-    result = steps.result(episode, full_meta, traj, episode_metrics(traj))
-    for observer in observers:
-        observer.on_end(result)
+        # and their ends: a recorder interrupted while it finished its file (the footer written and synced,
+        # not yet renamed) left it as a .part, which a `kill` of simulate under load met
+        traj = env.trajectory()
+        result = steps.result(episode, full_meta, traj, episode_metrics(traj))
+        for observer in observers:
+            observer.on_end(result)
     return result
 
 

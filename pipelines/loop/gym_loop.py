@@ -160,9 +160,9 @@ def run_gym_episode(
             obs = info["observation"]
             done = terminated or truncated
             interrupt.check()
-    result = _result(steps, base, full_meta, info)
-    for observer in observers:
-        observer.on_end(result)
+        result = _result(steps, base, full_meta, info)
+        for observer in observers:  # their ends too, as run_episode's
+            observer.on_end(result)
     return result
 
 

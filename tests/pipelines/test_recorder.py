@@ -359,3 +359,26 @@ def test_a_write_the_disk_refuses_names_the_unfinished_recording(tmp_path):
     with file_size_limit(part.stat().st_size), pytest.raises(PipelineError, match=expected):
         rec.close()  # the summary and footer no longer fit
     assert rec.closed and not path.exists() and part.stat().st_size > 0
+
+
+@pytest.mark.parametrize("where", ["start", "metadata"])
+def test_an_interrupt_as_a_recording_begins_leaves_no_part(tmp_path, monkeypatch, where):
+    """A Ctrl-C (or a `kill`, which the CLI takes as one) while the recorder wrote its header or metadata,
+    before the constructor returned, left a ``.part`` of a header that nobody held to finish or remove:
+    `simulate --record` killed as an episode began kept one beside its finished files (seen under load)."""
+    import mcap.writer
+
+    def interrupt(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    if where == "start":
+        monkeypatch.setattr(mcap.writer.Writer, "start", interrupt)
+    else:
+        monkeypatch.setattr(McapRecorder, "add_metadata", interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        McapRecorder(tmp_path / "a.mcap", metadata={"episode": {"seed": "1"}})
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.undo()
+    with McapRecorder(tmp_path / "a.mcap") as again:  # the name is free, its lock gone with the file
+        again.write("/robots", ROBOT_MESSAGE, 0, schema=ROBOTS)
+    assert [p.name for p in tmp_path.iterdir()] == ["a.mcap"]

@@ -87,6 +87,31 @@ def test_ctrl_c_is_raised_when_the_step_in_progress_ends(name, gym_loop):
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
+class _SignalledAtEnd(_Steps):
+    """An observer that is sent ``sig`` as it ends the episode, as a recorder finishing its file may be."""
+
+    def __init__(self, sig: int) -> None:
+        super().__init__()
+        self.sig = sig
+        self.ended = False
+
+    def on_end(self, result) -> None:
+        os.kill(os.getpid(), self.sig)
+        self.ended = True  # a recorder's rename, after its footer
+
+
+@pytest.mark.parametrize("gym_loop", [False, True], ids=["run_episode", "run_gym_episode"])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["ctrl_c", "terminate"])
+def test_an_interrupt_as_the_observers_end_is_raised_once_they_have_ended(sig, gym_loop, default_terminate):
+    """The observers' ends ran outside the loop's hold: a `kill` of simulate while the recorder finished an
+    episode's file (footer written and synced, not yet renamed) left it as a .part (a fresh clone's suite
+    failed test_a_terminated_simulate_keeps_the_episodes_that_finished so, under load)."""
+    observer = _SignalledAtEnd(sig)
+    with terminate_as_interrupt(), pytest.raises(KeyboardInterrupt):
+        _episode(make_controller(ControllerSpec("straight")), observer, gym_loop)
+    assert observer.ended
+
+
 def test_a_second_ctrl_c_is_raised_at_once():
     controller, acts = _signalled("straight", at_step=2, signals=2)
     with pytest.raises(KeyboardInterrupt):
