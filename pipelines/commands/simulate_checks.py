@@ -128,19 +128,18 @@ def check_mpc_solvable(config: RunConfig, folders: Sequence[Path | None] = ()) -
     """The bounds and least values the MPC's NLP is built with (``mpc.nlp.check_solvable``), refused as a
     run starts and named where they were chosen; a config read back from a sweep folder is not held to
     them. ``folders``: the sweep folders the run would add to or take from (--out, --reuse), named in the
-    refusal when one ran with the value before its bound (``recorded.ran_beyond_bound``)."""
+    refusal when one ran with the value before its bound (``recorded.ran_beyond_bound_in``)."""
     from mpc.errors import MPCConfigError
     from mpc.nlp import check_solvable as check_nlp
     from pipelines.config.entries import reason
-    from pipelines.config.recorded import ran_beyond_bound
+    from pipelines.config.recorded import ran_beyond_bound_in
 
     try:
         check_nlp(config.mpc)
     except MPCConfigError as exc:
         key = str(exc).partition(" ")[0]  # its message starts with the field it refuses
-        value = getattr(config.mpc, key)
-        notes = (ran_beyond_bound(folder, "mpc", key, value) for folder in folders if folder is not None)
-        raise config.error("mpc", key, reason(str(exc), key) + next((n for n in notes if n), "")) from None
+        ran = ran_beyond_bound_in(folders, "mpc", key, getattr(config.mpc, key))
+        raise config.error("mpc", key, reason(str(exc), key) + ran) from None
 
 
 def check_predictors_known(config: RunConfig, *keys: tuple[str, str]) -> None:

@@ -95,10 +95,11 @@ def run(args: argparse.Namespace) -> int:
     tasks = config.tasks()
     cells = experiment.cells(config.humans, config.n_robots)
     models = None  # the predictors the notes and the plan's checks read, read once for both
+    folders = (out, args.reuse)  # named where one ran a value refused now (recorded.ran_beyond_bound_in)
     if not args.report_only:
         models = noted_models(experiment, cfg, cells)  # a killed calibrate's blocks taken out first
     if args.dry_run:
-        check_plan(experiment, cfg, models)  # a plan whose every episode would fail is not fine
+        check_plan(experiment, cfg, models, folders)  # a plan whose every episode would fail is not fine
         check_first_episodes(tasks)
         from pipelines.commands.sweep_dry_run import print_plan
 
@@ -108,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     status = 0
     log: LogRead | None = None  # None: the report reads the log
     if not args.report_only:
-        check_plan(experiment, cfg, models)
+        check_plan(experiment, cfg, models, folders)
         check_first_episodes(tasks)
         if config.jit:
             check_compile_cache(cfg.label("sweep", "jit"), cfg.sweep.jit)

@@ -26,6 +26,7 @@ from pipelines.loop.margins_read import Refused, block_of, look_up, read_once
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Mapping
+    from pathlib import Path
 
     from mpc.config import MPCConfig
     from pipelines.config import RunConfig
@@ -71,7 +72,10 @@ def noted_models(experiment: Experiment, cfg: RunConfig | None, cells: Iterable[
 
 
 def check_plan(
-    experiment: Experiment, cfg: RunConfig | None = None, models: PlanModels | None = None
+    experiment: Experiment,
+    cfg: RunConfig | None = None,
+    models: PlanModels | None = None,
+    folders: Iterable[Path | None] = (),
 ) -> None:
     """The checks a plan passes before any worker starts, in the dry run as in the run: the installed
     controllers (an entry point that would shadow a shipped one is refused here, as ``simulate`` refuses it,
@@ -83,7 +87,9 @@ def check_plan(
     mpc.d_min: method 'CMPC' of ..."), as simulate's do: they named the method alone, and a file's value
     looked like one of the experiment's. ``models``: ``check_predictors``' as ``noted_models`` made them
     (None: made here), with the blocks ``planned_margins`` looked up there, or their refusal (not looked up
-    again: its refusal is raised in its turn)."""
+    again: its refusal is raised in its turn). ``folders``: the sweep folders the run adds to or takes from
+    (--out, --reuse), named in the refusal of a sensor range or neighbor_dist one of them ran with before its
+    bound (``recorded.ran_beyond_bound_in``), as ``check_mpc_solvable`` names them for the MPC's."""
     from pipelines.loop.spec import controller_names
 
     controller_names()
@@ -101,8 +107,8 @@ def check_plan(
             (("controller", "margins"), ("mpc", "horizon"), *SENSING_KEYS),
         ),
         (check_contact_distances, (("mpc", "d_min"),)),
-        (check_sensor_ranges, SENSING_KEYS[:1]),
-        (check_neighbor_distances, (("env.orca", "neighbor_dist"),)),
+        (partial(check_sensor_ranges, folders=folders), SENSING_KEYS[:1]),
+        (partial(check_neighbor_distances, folders=folders), (("env.orca", "neighbor_dist"),)),
         (check_solvable_values, SOLVABLE_KEYS),
     ):
         try:
@@ -182,29 +188,36 @@ def check_contact_distances(experiment: Experiment) -> None:
     )
 
 
-def check_sensor_ranges(experiment: Experiment) -> None:
+def check_sensor_ranges(experiment: Experiment, folders: Iterable[Path | None] = ()) -> None:
     """The range of the sensor the methods see through (a --vary column's too) within
     ``crowdsim.world.SENSOR_RANGE``, as the sensor checks it as it is built (``RangeLimited``), refused here,
     not once per episode in errors.jsonl; a --report-only of a folder that ran beyond them runs no such
-    check."""
+    check. The refusal names the one of ``folders`` (``check_plan``'s) that ran the range before its bound."""
     from crowdsim.world import sensor_range_beyond
+    from pipelines.config.recorded import ran_beyond_bound_in
 
     for world in (experiment.world, *experiment.method_worlds.values()):
-        beyond = None if world.sensor_range is None else sensor_range_beyond(world.sensor_range)
+        sensed = world.sensor_range
+        beyond = None if sensed is None else sensor_range_beyond(sensed)
         if beyond is not None:
-            raise PipelineError(f"the sensor range {beyond}")
+            ran = ran_beyond_bound_in(folders, "simulate", "sensor_range", sensed)
+            raise PipelineError(f"the sensor range {beyond}{ran}")
 
 
-def check_neighbor_distances(experiment: Experiment) -> None:
+def check_neighbor_distances(experiment: Experiment, folders: Iterable[Path | None] = ()) -> None:
     """ORCA's neighbor_dist in every world the methods run in (a --vary column's too) at least
     ``crowdsim.orca.LEAST_NEIGHBOR_DIST``, as orca_velocities checks it, refused here, not once per episode
-    in errors.jsonl; a --report-only of a folder that ran less runs no such check."""
+    in errors.jsonl; a --report-only of a folder that ran less runs no such check. The refusal names the one
+    of ``folders`` (``check_plan``'s) that ran the distance before its bound."""
     from crowdsim.orca import neighbor_dist_beyond
+    from pipelines.config.recorded import ran_beyond_bound_in
 
     for world in (experiment.world, *experiment.method_worlds.values()):
-        beyond = neighbor_dist_beyond(world.env_config().orca)
+        orca = world.env_config().orca
+        beyond = neighbor_dist_beyond(orca)
         if beyond is not None:
-            raise PipelineError(f"ORCA's neighbor_dist {beyond}")
+            ran = ran_beyond_bound_in(folders, "env.orca", "neighbor_dist", orca.neighbor_dist)
+            raise PipelineError(f"ORCA's neighbor_dist {beyond}{ran}")
 
 
 def check_solvable_values(experiment: Experiment) -> None:

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import shlex
 import textwrap
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
@@ -101,7 +101,8 @@ def report_config(args: Any, options: Sequence[Option]) -> RunConfig:
 def ran_beyond_bound(directory: Path, section: str, key: str, value: Any) -> str:
     """The words ("" for none) a refusal of ``value`` adds when a sweep's own run in ``directory`` recorded
     it: that folder ran before the bound refusing it now, and its report still reads back (the refusal alone
-    sent a rerun or --reuse of it to look for a typo, as if the folder held no such run)."""
+    sent a rerun or --reuse of it to look for a typo, as if the folder held no such run). ``section`` as a
+    record names it: ``env.orca`` is one of its own there (``RunConfig.effective``), not nested in ``env``."""
     from pipelines.experiments.run_lines import own_runs
 
     try:
@@ -117,6 +118,13 @@ def ran_beyond_bound(directory: Path, section: str, key: str, value: Any) -> str
                 f"and `crowdmpc sweep --report-only --out {shlex.quote(str(directory))}` still reports it"
             )
     return ""
+
+
+def ran_beyond_bound_in(folders: Iterable[Path | None], section: str, key: str, value: Any) -> str:
+    """``ran_beyond_bound``'s words for the first of ``folders`` (the sweep folders a run would add to or
+    take from, --out and --reuse; None: not given) whose sweep ran ``value``, "" for none."""
+    notes = (ran_beyond_bound(folder, section, key, value) for folder in folders if folder is not None)
+    return next((note for note in notes if note), "")
 
 
 def last_own_run(runs: list[dict[str, Any]]) -> int:

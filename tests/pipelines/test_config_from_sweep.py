@@ -494,3 +494,51 @@ def test_a_rerun_of_a_sweep_beyond_a_bound_added_since_names_its_folder_and_repo
         )
     assert (sorted(p.name for p in out.iterdir()), (out / EPISODES_FILE).read_text()) == held
     assert not new.exists()
+
+
+@pytest.mark.parametrize(
+    "module, bound, lifted, ran, refusal, recorded",
+    [
+        (
+            "crowdsim.world",
+            "SENSOR_RANGE",
+            (1e-6, math.inf),
+            ["--sensor-range", "2000"],
+            "--sensor-range: the sensor range must be at most 1000 m, got 2000.0",
+            "simulate.sensor_range = 2000.0",
+        ),
+        (
+            "crowdsim.orca",
+            "LEAST_NEIGHBOR_DIST",
+            0.0,
+            ["--set", "env.orca.neighbor_dist=1e-12"],
+            "--set env.orca.neighbor_dist: ORCA's neighbor_dist must be at least 1e-06 m, got 1e-12",
+            "env.orca.neighbor_dist = 1e-12",
+        ),
+    ],
+    ids=["sensor_range", "neighbor_dist"],
+)
+def test_a_rerun_of_a_sweep_beyond_a_world_bound_added_since_names_its_folder_and_report(
+    tmp_path, capsys, monkeypatch, module, bound, lifted, ran, refusal, recorded
+):
+    """The sensor range's bounds and ORCA's least neighbor_dist came after the MPC's: the same command again
+    into a folder that ran --sensor-range 2000 before them (or --reuse of it, or its dry run) was refused in
+    their words alone, where the MPC's refusal names the folder and that its report still reads back."""
+    import importlib
+
+    out, new = tmp_path / "sweep", tmp_path / "new"
+    options = ["--experiment", "controllers", "--controllers", "orca", "--humans", "2"]
+    options += ["--episodes-per-cell", "1", "--backend", "inline", "--no-progress", *ran]
+    with monkeypatch.context() as before:
+        before.setattr(importlib.import_module(module), bound, lifted)
+        assert main(["sweep", *options, "--out", str(out)]) == 0
+    held = sorted(p.name for p in out.iterdir()), (out / EPISODES_FILE).read_text()
+    for folder, extra in ((out, []), (out, ["--dry-run"]), (new, ["--reuse", str(out)])):
+        capsys.readouterr()
+        assert main(["sweep", *options, *extra, "--episodes-per-cell", "2", "--out", str(folder)]) == 2
+        assert capsys.readouterr().err == (
+            f"crowdmpc sweep: error: {refusal}; {out} ran with {recorded} before that bound: no more of it "
+            f"runs, and `crowdmpc sweep --report-only --out {out}` still reports it\n"
+        )
+    assert (sorted(p.name for p in out.iterdir()), (out / EPISODES_FILE).read_text()) == held
+    assert not new.exists()

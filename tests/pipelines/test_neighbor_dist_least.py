@@ -56,5 +56,6 @@ def test_a_sweep_that_ran_less_still_reports_and_is_not_run_again(tmp_path, caps
     assert main(["sweep", *options, "--episodes-per-cell", "2", "--out", str(out)]) == 2
     assert one_line(capsys.readouterr().err) == (
         "crowdmpc sweep: error: --set env.orca.neighbor_dist: ORCA's neighbor_dist must be at least 1e-06 m, "
-        "got 1e-12"
+        f"got 1e-12; {out} ran with env.orca.neighbor_dist = 1e-12 before that bound: no more of it runs, "
+        f"and `crowdmpc sweep --report-only --out {out}` still reports it"
     )

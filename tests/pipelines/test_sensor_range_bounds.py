@@ -71,7 +71,9 @@ def test_a_sweep_that_ran_beyond_them_still_reports_and_is_not_run_again(tmp_pat
     assert "\nsensor_range = 2000.0 " in capsys.readouterr().out
     assert main(["sweep", *options, "--episodes-per-cell", "2", "--out", str(out)]) == 2
     assert one_line(capsys.readouterr().err) == (
-        "crowdmpc sweep: error: --sensor-range: the sensor range must be at most 1000 m, got 2000.0"
+        "crowdmpc sweep: error: --sensor-range: the sensor range must be at most 1000 m, got 2000.0; "
+        f"{out} ran with simulate.sensor_range = 2000.0 before that bound: no more of it runs, and "
+        f"`crowdmpc sweep --report-only --out {out}` still reports it"
     )
 
 
