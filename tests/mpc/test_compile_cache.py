@@ -526,23 +526,31 @@ except KeyboardInterrupt:
 """
 
 
-def stop_a_slow_compile(cache: Path, tmp_path: Path, signum: int) -> tuple[float, int | None, str]:
-    """Send ``signum`` to a child process alone (not its group) while its compile runs gcc (a stand-in that
-    sleeps 60 s): seconds from the signal to the child's exit (None: not within 15 s), its exit status and
-    what it printed. The stand-in's own process (gcc) is gone by then."""
+def at_a_slow_compile(cache: Path, tmp_path: Path, template: str) -> tuple[subprocess.Popen, Path]:
+    """A child process running ``template`` (its root and gcc filled in), in a session of its own, once its
+    compile runs gcc, a stand-in that sleeps 60 s (up to 2 min to get there on a loaded host): the child, and
+    the file holding the stand-in's pid."""
     gcc_pid = tmp_path / "gcc.pid"
     slow = fake_compiler(tmp_path, f"echo $$ > {gcc_pid}.new; mv {gcc_pid}.new {gcc_pid}; exec sleep 60")
     script = tmp_path / "child.py"
-    script.write_text(textwrap.dedent(STOPPED.format(root=str(ROOT), gcc=slow.path)))
+    script.write_text(textwrap.dedent(template.format(root=str(ROOT), gcc=slow.path)))
     env = os.environ | {compile_cache.CACHE_ENV: str(cache.parent)}
     child = subprocess.Popen(
         [sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=env, start_new_session=True
     )
+    for _ in range(2400):
+        if gcc_pid.exists() or child.poll() is not None:
+            break
+        time.sleep(0.05)
+    return child, gcc_pid
+
+
+def stop_a_slow_compile(cache: Path, tmp_path: Path, signum: int) -> tuple[float, int | None, str]:
+    """Send ``signum`` to a child process alone (not its group) while its compile runs gcc (a stand-in that
+    sleeps 60 s): seconds from the signal to the child's exit (None: not within 15 s), its exit status and
+    what it printed. The stand-in's own process (gcc) is gone by then."""
+    child, gcc_pid = at_a_slow_compile(cache, tmp_path, STOPPED)
     try:
-        for _ in range(2400):  # up to 2 min to reach the compile on a loaded host
-            if gcc_pid.exists() or child.poll() is not None:
-                break
-            time.sleep(0.05)
         signalled = time.monotonic()
         os.kill(child.pid, signum)
         try:
@@ -605,19 +613,8 @@ def test_a_ctrl_c_stops_a_compile_off_the_main_thread(cache, tmp_path, sigint_as
     from Python, where signals reach the main thread alone: gcc in a process group of its own was out of a
     terminal's Ctrl-C, ran on after its process had exited and wrote its object file into the cache. There
     it stays in its caller's group: the Ctrl-C ends it, the thread raises KeyboardInterrupt, files gone."""
-    gcc_pid = tmp_path / "gcc.pid"
-    slow = fake_compiler(tmp_path, f"echo $$ > {gcc_pid}.new; mv {gcc_pid}.new {gcc_pid}; exec sleep 60")
-    script = tmp_path / "child.py"
-    script.write_text(textwrap.dedent(THREADED.format(root=str(ROOT), gcc=slow.path)))
-    env = os.environ | {compile_cache.CACHE_ENV: str(cache.parent)}
-    child = subprocess.Popen(
-        [sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=env, start_new_session=True
-    )
+    child, gcc_pid = at_a_slow_compile(cache, tmp_path, THREADED)
     try:
-        for _ in range(2400):  # up to 2 min to reach the compile on a loaded host
-            if gcc_pid.exists() or child.poll() is not None:
-                break
-            time.sleep(0.05)
         os.killpg(child.pid, signal.SIGINT)  # a terminal's Ctrl-C: its foreground process group
         out, _ = child.communicate(timeout=15)
         with pytest.raises(ProcessLookupError):  # ended, not running on
