@@ -456,24 +456,30 @@ except BaseException as exc:
 """
 
 
-def test_ctrl_c_during_a_cold_compile_interrupts_the_program(cache, tmp_path, sigint_as_at_a_terminal):
-    """CasADi compiles with system(), which ignores SIGINT in the caller while gcc runs: a Ctrl-C stopped gcc
-    alone, and the program went on to report "compiling the solver ... failed" (a sweep: a failed cell)."""
-    started = tmp_path / "started"
-    slow = fake_compiler(tmp_path, f": > {started}; sleep 60")
+def at_a_slow_compile(cache: Path, tmp_path: Path, template: str) -> tuple[subprocess.Popen, Path]:
+    """A child process running ``template`` (its root and gcc filled in), in a session of its own, once its
+    compile runs gcc, a stand-in that sleeps 60 s (up to 2 min to get there on a loaded host): the child, and
+    the file holding the stand-in's pid. (30 s ran out on a host running two suites: the signal came in
+    CasADi's code generation, whose C++ call held Python's handler, and the child sat out the compile.)"""
+    gcc_pid = tmp_path / "gcc.pid"
+    slow = fake_compiler(tmp_path, f"echo $$ > {gcc_pid}.new; mv {gcc_pid}.new {gcc_pid}; exec sleep 60")
     script = tmp_path / "child.py"
-    script.write_text(textwrap.dedent(INTERRUPTED.format(root=str(ROOT), gcc=slow.path)))
+    script.write_text(textwrap.dedent(template.format(root=str(ROOT), gcc=slow.path)))
     env = os.environ | {compile_cache.CACHE_ENV: str(cache.parent)}
     child = subprocess.Popen(
         [sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=env, start_new_session=True
     )
-    # Up to 2 min for the child to reach the compile: on a loaded host (two suites at once) 30 s ran out and
-    # the SIGINT came before the fake compiler started, likely in CasADi's code generation, one C++ call with
-    # the compile, so Python's handler waited for it: the child sat out the 60 s compile (TimeoutExpired).
     for _ in range(2400):
-        if started.exists() or child.poll() is not None:
+        if gcc_pid.exists() or child.poll() is not None:
             break
         time.sleep(0.05)
+    return child, gcc_pid
+
+
+def test_ctrl_c_during_a_cold_compile_interrupts_the_program(cache, tmp_path, sigint_as_at_a_terminal):
+    """CasADi compiled with system(), which ignores SIGINT in the caller while gcc runs: a Ctrl-C stopped gcc
+    alone, and the program went on to report "compiling the solver ... failed" (a sweep: a failed cell)."""
+    child, _ = at_a_slow_compile(cache, tmp_path, INTERRUPTED)
     os.killpg(child.pid, signal.SIGINT)  # what the terminal sends the foreground process group
     out, _ = child.communicate(timeout=60)
     assert out.split() == ["KeyboardInterrupt"]
@@ -524,25 +530,6 @@ try:
 except KeyboardInterrupt:
     print("KeyboardInterrupt")
 """
-
-
-def at_a_slow_compile(cache: Path, tmp_path: Path, template: str) -> tuple[subprocess.Popen, Path]:
-    """A child process running ``template`` (its root and gcc filled in), in a session of its own, once its
-    compile runs gcc, a stand-in that sleeps 60 s (up to 2 min to get there on a loaded host): the child, and
-    the file holding the stand-in's pid."""
-    gcc_pid = tmp_path / "gcc.pid"
-    slow = fake_compiler(tmp_path, f"echo $$ > {gcc_pid}.new; mv {gcc_pid}.new {gcc_pid}; exec sleep 60")
-    script = tmp_path / "child.py"
-    script.write_text(textwrap.dedent(template.format(root=str(ROOT), gcc=slow.path)))
-    env = os.environ | {compile_cache.CACHE_ENV: str(cache.parent)}
-    child = subprocess.Popen(
-        [sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=env, start_new_session=True
-    )
-    for _ in range(2400):
-        if gcc_pid.exists() or child.poll() is not None:
-            break
-        time.sleep(0.05)
-    return child, gcc_pid
 
 
 def stop_a_slow_compile(cache: Path, tmp_path: Path, signum: int) -> tuple[float, int | None, str]:
