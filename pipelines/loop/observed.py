@@ -46,6 +46,7 @@ def check_fields(obs: Observation) -> None:
         # NaN velocities failed in the MPC as "states must be finite ... (M, 4)"
         _check_finite(obs, name, "a controller plans from the current state")
     _check_present(obs)
+    _check_reached(obs)
 
 
 def _agents(obs: Observation, name: str) -> int:
@@ -92,13 +93,28 @@ def _check_present(obs: Observation) -> None:
     if obs.human_present is None:
         return
     present = np.asarray(obs.human_present)
-    flags = present.dtype == bool or (present.dtype.kind in "iuf" and np.isin(present, (0, 1)).all())
-    if present.shape != (obs.n_humans,) or not flags:
+    if present.shape != (obs.n_humans,) or not _is_flags(present):
         raise PipelineError(
             f"obs.human_present must be {obs.n_humans} boolean{'' if obs.n_humans == 1 else 's'}, one per "
             "human (tracked now or not), got "
             f"{present.dtype} of shape {present.shape}"
             + ("" if present.shape != (obs.n_humans,) else f": {present.tolist()}")
+        )
+
+
+def _is_flags(values: np.ndarray) -> bool:
+    """Booleans, or numbers that are each 0 or 1 (a tracker's or a hand-built array of ints)."""
+    return values.dtype == bool or (values.dtype.kind in "iuf" and bool(np.isin(values, (0, 1)).all()))
+
+
+def _check_reached(obs: Observation) -> None:
+    """PipelineError where ``obs.robot_reached`` (its shape checked) is not booleans or 0/1: the MPC took
+    ``bool`` of each, so 0.5 or 2 (a distance, a count) read as arrived, and that robot held position."""
+    reached = np.asarray(obs.robot_reached)
+    if not _is_flags(reached):
+        raise PipelineError(
+            "obs.robot_reached must be one boolean per robot (has it been within obs.radius of its goal), "
+            f"got {reached.dtype}: {short_repr(reached.tolist())}"
         )
 
 

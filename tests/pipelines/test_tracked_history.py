@@ -115,3 +115,33 @@ def test_human_present_is_one_boolean_per_human(present, got):
         assert str(refused.value) == (
             f"obs.human_present must be 1 boolean, one per human (tracked now or not), {got}"
         )
+
+
+@pytest.mark.parametrize(
+    ("reached", "got"),
+    [
+        (np.array([True, False, False]), None),
+        (np.array([1, 0, 0]), None),  # a hand-built array of ints: taken, as human_present's
+        (np.array([0.5, 0.0, 0.0]), "got float64: [0.5, 0.0, 0.0]"),
+        (np.array([2, 0, 0]), "got int64: [2, 0, 0]"),
+    ],
+)
+def test_robot_reached_is_one_boolean_per_robot(reached, got):
+    """0.5 or 2 (a distance, a count) read as arrived (the MPC took ``bool`` of each) and the robot held
+    position; 0/1 ints stay taken."""
+    import dataclasses
+
+    from pipelines.loop.mpc_setup import check_history
+    from pipelines.loop.observed import check_state
+
+    obs = dataclasses.replace(_late_human(50), robot_reached=reached)
+    for check in (check_history, check_state):
+        if got is None:
+            check(obs)
+            continue
+        with pytest.raises(PipelineError) as refused:
+            check(obs)
+        assert str(refused.value) == (
+            "obs.robot_reached must be one boolean per robot (has it been within obs.radius of its goal), "
+            + got
+        )
