@@ -40,10 +40,12 @@ def run_number(record: Mapping[str, Any]) -> int | None:
 
 def runs_named(runs: Sequence[Any], used: Collection[int | None]) -> list[Any]:
     """The lines of ``runs`` that the records' ``used`` numbers (``run_number``) name, in number order; every
-    line where a record names none; a number past the lines, a run the file lost (``{"lost": ""}``)."""
+    line where a record names none; a number past the lines, or below 1 (a damaged record: run 0 was passed
+    over where -1 was counted), a run the file lost (``{"lost": ""}``)."""
     if None in used:
         return list(runs)
-    return [runs[k - 1] if 1 <= k <= len(runs) else {"lost": ""} for k in sorted(k for k in used if k)]
+    named = sorted(k for k in used if k is not None)
+    return [runs[k - 1] if 1 <= k <= len(runs) else {"lost": ""} for k in named]
 
 
 def is_lost(run: Any) -> bool:

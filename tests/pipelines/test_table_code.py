@@ -48,3 +48,6 @@ def test_the_table_names_only_the_code_of_the_runs_it_tabulates(tmp_path, capsys
     assert code_note(out, {1, None}).startswith("Code: 3 versions")  # a record without its run: all of them
     assert code_note(out, {3}) == "Code: unknown (a run sweep.json no longer listed)."
     assert code_note(out, {1, 9}).endswith("; unknown (a run sweep.json no longer listed).")  # past its lines
+    for damaged in (0, -1):  # a record naming no line of the file: run 0 was passed over, -1 counted
+        note = code_note(out, {1, damaged})
+        assert note.startswith("Code: 2 versions") and "unknown (a run sweep.json no longer listed)" in note
