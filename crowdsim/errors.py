@@ -1,6 +1,7 @@
 """Errors a user can cause through the simulator (bad scenario, bad sizes); the CLI prints them plainly. And
 the warning of a layout that runs but is probably not what was meant. And the one check of a number a setting
 takes (``real_number``, ``whole_number``), so that every settings class accepts and refuses the same values.
+And ``counted``, how a message counts robots, humans or pedestrians.
 """
 
 from __future__ import annotations
@@ -13,6 +14,14 @@ import numpy as np
 
 class SimulationError(ValueError):
     """Base class of the user-facing errors raised by `crowdsim`."""
+
+
+def counted(n: int, noun: str, plural: str = "") -> str:
+    """ "1 robot", "3 robots", "0 pedestrians" (``plural``, when not the noun and an s: "1 entry", "2
+    entries"): the simulator's refusals said "the episode's 1 robots", where runs of one robot or one human
+    are allowed. crowdsim's own: the pipelines' ``predictors.text_table.counted`` is out of its reach
+    (crowdsim imports nothing else of the project, tests/test_layering.py)."""
+    return f"{n} {noun if n == 1 else plural or noun + 's'}"
 
 
 def got(value: float) -> str:
@@ -55,8 +64,8 @@ def too_crowded(
     no advice when a large spawn_separation was the cause."""
     return SimulationError(
         f"could not place human {human + 1} of n_humans={n_humans} in scenario {scenario!r} with "
-        f"{n_robots} robots after {draws} draws, each start and goal {min_dist:g} m apart (2 x radius + "
-        "spawn_separation); use fewer agents, or a smaller spawn_separation or radius"
+        f"{counted(n_robots, 'robot')} after {counted(draws, 'draw')}, each start and goal {min_dist:g} m "
+        "apart (2 x radius + spawn_separation); use fewer agents, or a smaller spawn_separation or radius"
     )
 
 

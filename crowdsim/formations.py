@@ -70,7 +70,7 @@ from typing import Any, Final, Literal, get_args
 
 import numpy as np
 
-from crowdsim.errors import SimulationError
+from crowdsim.errors import SimulationError, counted
 from crowdsim.world import D_FLOCK, D_MIN
 
 Formation = Literal["auto", "row", "wedge", "two_rows", "antipodal"]  # module docstring
@@ -183,7 +183,7 @@ def check_robot_spacing(starts: np.ndarray, radius: float, formation: Formation,
             "" if chosen == "antipodal" else "space them out ([env] robot_spacing, m between neighbours) or "
         )
         raise SimulationError(
-            f"radius {radius:g} m: the {chosen} formation of {n_robots} robots puts neighbours {closest:g} m "
-            f"apart, in contact from the start (2 x radius = {2.0 * radius:g} m); {spaced}use [world] radius "
-            f"<= {closest / 2.0:g} m"
+            f"radius {radius:g} m: the {chosen} formation of {counted(n_robots, 'robot')} puts neighbours "
+            f"{closest:g} m apart, in contact from the start (2 x radius = {2.0 * radius:g} m); {spaced}use "
+            f"[world] radius <= {closest / 2.0:g} m"
         )

@@ -106,7 +106,7 @@ from gymnasium import spaces
 from crowdsim import ENV_ID
 from crowdsim.env import CrowdEnv, Observation
 from crowdsim.env_config import EnvConfig
-from crowdsim.errors import SimulationError
+from crowdsim.errors import SimulationError, counted
 from crowdsim.gym_observation import (
     COLUMNS,
     GOAL,
@@ -280,9 +280,10 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         before = self._obs
         m = before.n_robots
         if not np.isfinite(a[:m]).all():  # the simulator refused it as "robot_accelerations", not the action
+            bad = int((~np.isfinite(a[:m])).sum())
             raise SimulationError(
-                f"action must be finite for the episode's {m} robots, got "
-                f"{int((~np.isfinite(a[:m])).sum())} non-finite entries"
+                f"action must be finite for the episode's {counted(m, 'robot')}, got "
+                f"{counted(bad, 'non-finite entry', 'non-finite entries')}"
             )
         obs, done, native = self._sim.step(a[:m])
         self._obs = obs

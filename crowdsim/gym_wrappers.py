@@ -30,7 +30,7 @@ import numpy as np
 from gymnasium import spaces
 
 from crowdsim.env import Observation
-from crowdsim.errors import SimulationError
+from crowdsim.errors import SimulationError, counted
 from crowdsim.gym_env import CrowdNavEnv, numbers
 from crowdsim.world import is_sensor_range
 
@@ -90,9 +90,10 @@ class VelocityControl(gym.ActionWrapper[np.ndarray, np.ndarray, np.ndarray], gym
             )
         m = self._native.n_robots
         if not np.isfinite(command[:m]).all():  # inf was clipped to a_max, NaN refused as accelerations
+            bad = int((~np.isfinite(command[:m])).sum())
             raise SimulationError(
-                f"velocity action must be finite for the episode's {m} robots, got "
-                f"{int((~np.isfinite(command[:m])).sum())} non-finite entries"
+                f"velocity action must be finite for the episode's {counted(m, 'robot')}, got "
+                f"{counted(bad, 'non-finite entry', 'non-finite entries')}"
             )
         accelerations = np.zeros_like(command)
         tracked = (command[:m] - self._native.robot_velocities) / self._period

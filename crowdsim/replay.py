@@ -40,7 +40,7 @@ from typing import Final
 
 import numpy as np
 
-from crowdsim.errors import SimulationError
+from crowdsim.errors import SimulationError, counted
 from crowdsim.formations import Formation, robot_layout
 
 # The BIWI EWAP sequences seq_eth and seq_hotel, whole or their last 20 % of frames alone: the TrajNet++ test
@@ -95,8 +95,8 @@ class Recording:
         if size * len(people) > MAX_GRID_CELLS:
             raise SimulationError(
                 f"recording {name!r}: frames {distinct[0]}..{distinct[-1]} on a step of {frame_step} make "
-                f"{size} rows for {len(people)} pedestrians, more than the {MAX_GRID_CELLS} cells a "
-                "recording may hold (frames far apart on one grid)"
+                f"{size} rows for {counted(len(people), 'pedestrian')}, more than the {MAX_GRID_CELLS} cells "
+                "a recording may hold (frames far apart on one grid)"
             )
         frames = _grid(distinct, frame_step)
         positions = np.full((len(frames), len(people), 2), np.nan)
@@ -235,10 +235,10 @@ def replay_episode(
     why = f"the most in one window: {most}"
     if blocked:
         clear = 2.0 * radius + START_CLEARANCE
-        draws = f"{blocked} draw{'' if blocked == 1 else 's'}"
+        draws = counted(blocked, "draw")
         why = f"{draws} with enough had someone within {clear:g} m of a robot's start; {why}"
     raise SimulationError(
-        f"{named}: no window in {WINDOW_TRIES} draws has {n_humans} pedestrians in "
+        f"{named}: no window in {WINDOW_TRIES} draws has {counted(n_humans, 'pedestrian')} in "
         f"its first {(chosen_rows - 1) * recording.dt:g} s and the robots' starts clear ({why}); use fewer "
         "humans"
     )

@@ -497,7 +497,7 @@ def test_a_non_finite_velocity_command_is_refused_as_such(bad):
     the user never gave. Rows past the episode's robots are ignored, as the tracker ignores them."""
     env = VelocityControl(CrowdNavEnv(n_robots=2, n_humans=1))
     env.reset(seed=0, options={"n_robots": 1})
-    with pytest.raises(SimulationError, match="velocity action must be finite for the episode's 1 robots"):
+    with pytest.raises(SimulationError, match="velocity action must be finite for the episode's 1 robot, "):
         env.step(np.array([[bad, 0.0], [0.0, 0.0]]))
     env.step(np.array([[0.5, 0.0], [bad, bad]]))
 
@@ -567,8 +567,9 @@ def test_a_non_finite_action_is_refused_as_the_action(bad):
     ignored, as they always were."""
     env = CrowdNavEnv(n_robots=2, n_humans=1)
     env.reset(seed=0, options={"n_robots": 1})
-    with pytest.raises(SimulationError, match=r"^action must be finite for the episode's 1 robots, got 1 "):
+    with pytest.raises(SimulationError) as refused:
         env.step(np.array([[bad, 0.0], [0.0, 0.0]]))
+    assert str(refused.value) == "action must be finite for the episode's 1 robot, got 1 non-finite entry"
     env.step(np.array([[0.5, 0.0], [bad, bad]]))
 
 
