@@ -53,7 +53,7 @@ import numpy as np
 
 from crowdsim.conventions import CROSSINGS, SPAWN_SEPARATION
 from crowdsim.crossings import PLACERS
-from crowdsim.errors import SimulationError, real_number
+from crowdsim.errors import SimulationError, counted, real_number
 from crowdsim.formations import FORMATIONS as FORMATIONS
 from crowdsim.formations import Formation as Formation
 from crowdsim.formations import check_robot_spacing
@@ -121,8 +121,8 @@ def checked_layout(layout: Layout) -> Layout:
     for starts, goals in (("robot_starts", "robot_goals"), ("human_starts", "human_goals")):
         if len(arrays[starts]) != len(arrays[goals]):
             raise SimulationError(
-                f"layout.{starts} has {len(arrays[starts])} rows but layout.{goals} {len(arrays[goals])}: "
-                "one goal per agent"
+                f"layout.{starts} has {counted(len(arrays[starts]), 'row')} but layout.{goals} "
+                f"{len(arrays[goals])}: one goal per agent"
             )
     limits = (
         ("robot_starts", "robots", "MAX_ROBOTS", MAX_ROBOTS),

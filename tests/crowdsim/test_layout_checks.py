@@ -77,7 +77,7 @@ def test_wrong_shapes_and_types_are_refused_by_field():
     bad = {
         "human_starts": (np.zeros(2), r"layout.human_starts must be a \(N, 2\) array, got shape \(2,\)"),
         "robot_goals": (np.zeros((1, 3)), r"layout.robot_goals must be a \(M, 2\) array, got shape \(1, 3\)"),
-        "human_goals": (np.zeros((2, 2)), "layout.human_starts has 1 rows but layout.human_goals 2"),
+        "human_goals": (np.zeros((2, 2)), "layout.human_starts has 1 row but layout.human_goals 2"),
         "robot_starts": ([["a", "b"]], r"layout.robot_starts must be a \(M, 2\) array of numbers"),
     }
     for name, (value, message) in bad.items():
