@@ -184,7 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
         dest="config_file",
         action="append",
         metavar="FILE",
-        help="a TOML config file (see `crowdmpc config show`)",
+        help="a TOML config file (see `crowdmpc config show`), or a pipe: --config <(...)",
     )
     parser.add_argument(
         "--set",

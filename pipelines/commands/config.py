@@ -37,7 +37,7 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
         dest="sub_config_file",
         action="append",  # two are refused (config_arguments), not the last one silently kept
         metavar="FILE",
-        help="a TOML config file (see `crowdmpc config show`); options given here override it",
+        help="a TOML config file (see `crowdmpc config show`), or a pipe; options given here override it",
     )
     parser.add_argument(
         "--set",

@@ -10,6 +10,7 @@ import datetime
 import difflib
 import errno
 import re
+import stat
 import sys
 import tomllib
 from dataclasses import dataclass
@@ -124,6 +125,18 @@ def _unreachable(path: Path) -> str | None:
     return None
 
 
+def _config_bytes(path: Path, where: str, piped: bool) -> bytes:
+    """The bytes of config file ``path``; of a pipe (a shell's ``--config <(...)``, which was refused as not
+    a file), read once, as it can be, and refused past 1 MiB as a file is."""
+    if not piped:
+        return path.read_bytes()
+    with path.open("rb") as pipe:
+        data = pipe.read(MAX_CONFIG_BYTES + 1)
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ConfigError(f"--config {where}: more than 1 MiB from the pipe; a config file is at most 1 MiB")
+    return data
+
+
 def read_file(path: str | Path) -> list[Entry]:
     """The entries of a TOML config file, in file order; unknown sections and keys refused."""
     where = str(path)
@@ -133,12 +146,13 @@ def read_file(path: str | Path) -> list[Entry]:
     problem = _unreachable(p)
     if problem is not None:
         raise ConfigError(f"--config {where}: {problem}")
-    if not p.is_file():
+    piped = stat.S_ISFIFO(p.stat().st_mode)
+    if not (piped or p.is_file()):
         raise ConfigError(f"--config {where}: not a file")
-    if p.stat().st_size > MAX_CONFIG_BYTES:
+    if not piped and p.stat().st_size > MAX_CONFIG_BYTES:
         raise ConfigError(f"--config {where}: {p.stat().st_size} bytes; a config file is at most 1 MiB")
     try:  # utf-8-sig: a byte-order mark, which Windows editors write and TOML does not allow, is dropped
-        text = p.read_bytes().decode("utf-8-sig")
+        text = _config_bytes(p, where, piped).decode("utf-8-sig")
     except UnicodeDecodeError:
         raise ConfigError(f"{where}: not UTF-8 text (a TOML file)") from None
     except OSError as exc:

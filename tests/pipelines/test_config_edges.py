@@ -54,6 +54,35 @@ def test_a_config_file_over_one_mebibyte_is_refused(tmp_path):
         load(str(path))
 
 
+def test_a_config_from_a_pipe_is_read_once_and_bounded_as_a_file(tmp_path):
+    """A shell's ``--config <(...)`` (a pipe) was refused as "not a file"; it is read once, as a pipe can be
+    (a second read would find it empty), and over 1 MiB it is refused as a file is."""
+    import contextlib
+    import os
+    import threading
+
+    pipe = tmp_path / "config.fifo"
+    os.mkfifo(pipe)
+
+    def write(text: str) -> None:
+        with contextlib.suppress(BrokenPipeError):  # the refusal closes the pipe before the last bytes
+            pipe.write_text(text)
+
+    def written(text: str) -> threading.Thread:
+        writer = threading.Thread(target=write, args=(text,), daemon=True)
+        writer.start()
+        return writer
+
+    writer = written("[mpc]\nhorizon = 7\n")
+    assert load(str(pipe)).mpc.horizon == 7
+    writer.join(5)
+    writer = written("#" * (MAX_CONFIG_BYTES + 2))
+    with pytest.raises(ConfigError, match=r"config.fifo: more than 1 MiB from the pipe; a config file is at"):
+        load(str(pipe))
+    writer.join(5)
+    assert not writer.is_alive()
+
+
 def test_an_option_chooses_its_value_even_when_it_is_the_default(tmp_path: Path):
     """`--formation auto` is a choice (sweep_plan refuses options an experiment fixes); a file that states a
     default (as `config show` writes every key) chooses nothing, one that states another value does."""
