@@ -88,8 +88,9 @@ def check_plan(
     looked like one of the experiment's. ``models``: ``check_predictors``' as ``noted_models`` made them
     (None: made here), with the blocks ``planned_margins`` looked up there, or their refusal (not looked up
     again: its refusal is raised in its turn). ``folders``: the sweep folders the run adds to or takes from
-    (--out, --reuse), named in the refusal of a sensor range or neighbor_dist one of them ran with before its
-    bound (``recorded.ran_beyond_bound_in``), as ``check_mpc_solvable`` names them for the MPC's."""
+    (--out, --reuse), named in the refusal of a sensor range, neighbor_dist or MPC value (a --vary column's
+    too) one of them ran with before its bound (``recorded.ran_beyond_bound_in``), as ``check_mpc_solvable``
+    names them for the run's own [mpc] values."""
     from pipelines.loop.spec import controller_names
 
     controller_names()
@@ -109,7 +110,7 @@ def check_plan(
         (check_contact_distances, (("mpc", "d_min"),)),
         (partial(check_sensor_ranges, folders=folders), SENSING_KEYS[:1]),
         (partial(check_neighbor_distances, folders=folders), (("env.orca", "neighbor_dist"),)),
-        (check_solvable_values, SOLVABLE_KEYS),
+        (partial(check_solvable_values, folders=folders), SOLVABLE_KEYS),
     ):
         try:
             check(experiment)
@@ -220,15 +221,25 @@ def check_neighbor_distances(experiment: Experiment, folders: Iterable[Path | No
             raise PipelineError(f"ORCA's neighbor_dist {beyond}{ran}")
 
 
-def check_solvable_values(experiment: Experiment) -> None:
+def check_solvable_values(experiment: Experiment, folders: Iterable[Path | None] = ()) -> None:
     """Every CMPC and DMPC method's MPC takes the bounds and least values its NLP is built with
     (``MPC_BOUNDS``, ``MPC_LEAST``), as the NLP checks them, refused here with the method named (a column of
     --vary mpc.rho too), not once per episode in errors.jsonl; a --report-only of a folder that ran beyond
-    them runs no such check."""
+    them runs no such check. The refusal names the one of ``folders`` (``check_plan``'s) that ran the value
+    before its bound, as ``check_mpc_solvable`` does for the run's own [mpc] values."""
     from mpc.errors import MPCConfigError
     from mpc.nlp import check_solvable
+    from pipelines.config.recorded import ran_beyond_bound_in
 
-    _each_mpc(experiment, check_solvable, MPCConfigError)
+    def check(config: MPCConfig) -> None:
+        try:
+            check_solvable(config)
+        except MPCConfigError as exc:
+            key = str(exc).partition(" ")[0]  # its message starts with the field it refuses
+            ran = ran_beyond_bound_in(folders, "mpc", key, getattr(config, key, None))
+            raise MPCConfigError(f"{exc}{ran}") from None
+
+    _each_mpc(experiment, check, MPCConfigError)
 
 
 def _each_mpc(experiment: Experiment, check: Callable[[MPCConfig], None], refusal: type[Exception]) -> None:

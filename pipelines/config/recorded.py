@@ -101,8 +101,9 @@ def report_config(args: Any, options: Sequence[Option]) -> RunConfig:
 def ran_beyond_bound(directory: Path, section: str, key: str, value: Any) -> str:
     """The words ("" for none) a refusal of ``value`` adds when a sweep's own run in ``directory`` recorded
     it: that folder ran before the bound refusing it now, and its report still reads back (the refusal alone
-    sent a rerun or --reuse of it to look for a typo, as if the folder held no such run). ``section`` as a
-    record names it: ``env.orca`` is one of its own there (``RunConfig.effective``), not nested in ``env``."""
+    sent a rerun or --reuse of it to look for a typo, as if the folder held no such run), as its own setting
+    or a --vary column's (``_ran_values``). ``section`` as a record names it: ``env.orca`` is one of its own
+    there (``RunConfig.effective``), not nested in ``env``."""
     from pipelines.experiments.run_lines import own_runs
 
     try:
@@ -110,14 +111,33 @@ def ran_beyond_bound(directory: Path, section: str, key: str, value: Any) -> str
     except ConfigError:  # no sweep there: the refusal as for any run
         return ""
     for index in own_runs(runs):
-        values = runs[index - 1].get("config")
-        recorded = values.get(section) if isinstance(values, dict) else None
-        if isinstance(recorded, dict) and recorded.get(key) == value:
+        if value in _ran_values(runs[index - 1].get("config"), section, key):
             return (
                 f"; {directory} ran with {section}.{key} = {value!r} before that bound: no more of it runs, "
                 f"and `crowdmpc sweep --report-only --out {shlex.quote(str(directory))}` still reports it"
             )
     return ""
+
+
+def _ran_values(values: Any, section: str, key: str) -> list[Any]:
+    """The values of ``section.key`` a run line's recorded config (``values``) ran with: its own, and each of
+    a --vary column's, which the record keeps only as typed in [sweep] vary (``simulate.sensor_range=3,2000``,
+    ``mpc.w_goal=1,1e-60``): a rerun of that sweep was refused a column's value in the bound's words alone.
+    A damaged or foreign value is no value (the refusal is then as for any run)."""
+    if not isinstance(values, dict):
+        return []
+    own, sweep = values.get(section), values.get("sweep")
+    ran = [own.get(key)] if isinstance(own, dict) else []
+    vary = sweep.get("vary") if isinstance(sweep, dict) else None
+    for part in vary.split(";") if isinstance(vary, str) else ():
+        name, equals, items = part.partition("=")
+        if equals and name.strip() == f"{section}.{key}":
+            for item in items.split(","):
+                try:  # read as the sweep read it (sweep_vary's parse_set), so 2000 is the 2000.0 refused
+                    ran.append(parse_set(f"{section}.{key}={item}").value)
+                except ConfigError:
+                    continue
+    return [item for item in ran if item is not None]  # null: unset, no column (sweep_vary refuses it)
 
 
 def ran_beyond_bound_in(folders: Iterable[Path | None], section: str, key: str, value: Any) -> str:

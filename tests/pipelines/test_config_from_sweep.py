@@ -542,3 +542,67 @@ def test_a_rerun_of_a_sweep_beyond_a_world_bound_added_since_names_its_folder_an
         )
     assert (sorted(p.name for p in out.iterdir()), (out / EPISODES_FILE).read_text()) == held
     assert not new.exists()
+
+
+@pytest.mark.parametrize(
+    "bound, lifted, run, vary, refusal, recorded",
+    [
+        (
+            ("crowdsim.world", "SENSOR_RANGE"),
+            (1e-6, math.inf),
+            ["--controllers", "orca", "--humans", "2"],
+            "simulate.sensor_range=3,2000",
+            "the sensor range must be at most 1000 m, got 2000.0",
+            "simulate.sensor_range = 2000.0",
+        ),
+        (
+            ("crowdsim.orca", "LEAST_NEIGHBOR_DIST"),
+            0.0,
+            ["--controllers", "orca", "--humans", "2"],
+            "env.orca.neighbor_dist=10,1e-12",
+            "ORCA's neighbor_dist must be at least 1e-06 m, got 1e-12",
+            "env.orca.neighbor_dist = 1e-12",
+        ),
+        (
+            (MPC_LEAST, "w_goal"),
+            (0.0, MPC_LEAST["w_goal"][1]),
+            ["--controllers", "cmpc", "--humans", "1", "--robots", "1", "--set", "env.time_limit=2"],
+            "mpc.w_goal=1,1e-60",
+            "method 'cmpc w_goal=1e-60' of experiment 'controllers': w_goal must be at least 1e-40, got "
+            "1e-60",
+            "mpc.w_goal = 1e-60",
+        ),
+    ],
+    ids=["sensor_range", "neighbor_dist", "w_goal"],
+)
+def test_a_rerun_of_a_sweep_that_varied_a_value_beyond_a_bound_added_since_names_its_folder_and_report(
+    tmp_path, capsys, monkeypatch, bound, lifted, run, vary, refusal, recorded
+):
+    """A sweep record keeps a --vary column's values only as typed in [sweep] vary, which ran_beyond_bound
+    did not read: the same command again into a folder that ran --vary simulate.sensor_range=3,2000 before
+    the bound (or its dry run, or --reuse of it) was refused in the bound's words alone, as if the folder held
+    no such column. A fresh folder's refusal is the bound's words, as before."""
+    import importlib
+
+    out, new, fresh = tmp_path / "sweep", tmp_path / "new", tmp_path / "fresh"
+    options = ["--experiment", "controllers", *run, "--episodes-per-cell", "1", "--backend", "inline"]
+    options += ["--no-progress", "--vary", vary]
+    holder, name = bound
+    with monkeypatch.context() as before:
+        if isinstance(holder, dict):
+            before.setitem(holder, name, lifted)
+        else:
+            before.setattr(importlib.import_module(holder), name, lifted)
+        assert main(["sweep", *options, "--out", str(out)]) == 0
+    held = sorted(p.name for p in out.iterdir()), (out / EPISODES_FILE).read_text()
+    note = (
+        f"; {out} ran with {recorded} before that bound: no more of it runs, and `crowdmpc sweep "
+        f"--report-only --out {out}` still reports it"
+    )
+    runs = ((out, [], note), (out, ["--dry-run"], note), (new, ["--reuse", str(out)], note), (fresh, [], ""))
+    for folder, extra, said in runs:
+        capsys.readouterr()
+        assert main(["sweep", *options, *extra, "--episodes-per-cell", "2", "--out", str(folder)]) == 2
+        assert capsys.readouterr().err == f"crowdmpc sweep: error: --vary: {refusal}{said}\n"
+    assert (sorted(p.name for p in out.iterdir()), (out / EPISODES_FILE).read_text()) == held
+    assert not new.exists() and not fresh.exists()
