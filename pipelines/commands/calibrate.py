@@ -19,7 +19,7 @@ from pipelines.commands.calibrate_store import (
     take_back_killed,
     trained_on_notes,
 )
-from pipelines.commands.calibration_notes import wide_margins_notes
+from pipelines.commands.calibration_notes import sensor_range_refusal, wide_margins_notes
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
@@ -286,6 +286,9 @@ def _check_first(args: argparse.Namespace) -> None:
     else:  # stores nothing, but its held-out episodes may plan with the blocks in force: not a killed run's
         take_back_before_planning([holdout_margins])
     if args.source == "closed-loop":
+        refused = sensor_range_refusal(args.predictor, args.sensor_range)  # after a killed run's take-back
+        if refused is not None:
+            raise PipelineError(refused)
         # held-out margins looked up for the weights the zoo holds now; the blocks name those measured
         _check_closed_loop(args, holdout_margins, checkpoint_sha256(args.predictor))
         note = evaluation_seeds_note(args.seed, args.episodes)

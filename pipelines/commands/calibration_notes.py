@@ -363,3 +363,34 @@ def _block_options(block: Any, sensor: bool = True) -> str:
         if not block.sensor_tracks:
             options.append("--no-sensor-tracks")
     return " " + " ".join(options)
+
+
+def sensor_range_refusal(predictor: str, sensor_range: float | None) -> str | None:
+    """calibrate's refusal of a --sensor-range beyond ``crowdsim.world.SENSOR_RANGE`` (None: within it, or
+    none given; no distance at all is ``ClosedLoopPlan``'s to refuse), naming the calibrations file that
+    holds blocks of ``predictor`` made behind it before the bound: the same calibrate again was refused in
+    the bound's words alone, as if none were stored, where they stay in force (a run behind the nearest
+    range plans with one)."""
+    from crowdsim.world import is_sensor_range, sensor_range_beyond
+    from predictors.calibration_store import stored_calibrations
+    from predictors.errors import PredictorError
+
+    if sensor_range is None or not is_sensor_range(sensor_range):
+        return None
+    beyond = sensor_range_beyond(sensor_range)
+    if beyond is None:
+        return None
+    try:
+        stored = stored_calibrations()
+    except (PredictorError, OSError):  # a file calibrate cannot read: the refusal as for any range
+        stored = []
+    made = [(path, b) for path, b in stored if b.predictor == predictor and b.sensor_range == sensor_range]
+    if not made:
+        return f"--sensor-range {beyond}"
+    files = ", ".join(sorted({str(path) for path, _ in made}))
+    alphas = ", ".join(f"{b.alpha:g}" for _, b in made)
+    return (
+        f"--sensor-range {beyond}; {files} holds {predictor}'s closed-loop margins behind a "
+        f"{sensor_range:g} m sensor (alpha {alphas}), made before that bound: they stay, as `crowdmpc zoo "
+        "calibrations` lists them"
+    )

@@ -135,3 +135,30 @@ def test_no_sensor_tracks_calibrates_behind_a_tracker_that_reports_none_and_need
     real = ["calibrate", "--predictor", "constant_velocity", "--source", "real", "--no-sensor-tracks"]
     assert main(real) == 2
     assert "--no-sensor-tracks is for --source closed-loop" in capsys.readouterr().err
+
+
+def test_a_rerun_of_a_calibrate_beyond_the_range_bound_added_since_names_the_blocks_it_made(
+    tmp_path, capsys, monkeypatch
+):
+    """A calibrate behind a 2000 m sensor before crowdsim.world.SENSOR_RANGE's 1000 m, run again (or its
+    dry run), was refused in the bound's words alone, as if no block of that sensor were stored: the
+    refusal names the file holding them, which stay as they were. Another range's refusal is as before."""
+    import crowdsim.world
+
+    argv = [*CALIBRATE, "--alpha", "0.45", "--episodes", "2", "--humans", "4", "--sensor-range", "2000"]
+    with monkeypatch.context() as before:
+        before.setattr(crowdsim.world, "SENSOR_RANGE", (1e-6, math.inf))
+        assert main(argv) == 0
+    stored = tmp_path / "zoo" / "calibrations.json"
+    held = stored.read_text()
+    bound = "crowdmpc calibrate: error: --sensor-range must be at most 1000 m, got"
+    for extra in ([], ["--dry-run"]):
+        capsys.readouterr()
+        assert main([*argv, *extra]) == 2
+        assert capsys.readouterr().err == (
+            f"{bound} 2000.0; {stored} holds constant_velocity's closed-loop margins behind a 2000 m sensor "
+            "(alpha 0.45), made before that bound: they stay, as `crowdmpc zoo calibrations` lists them\n"
+        )
+    assert main([*argv[:-1], "3000"]) == 2
+    assert capsys.readouterr().err == f"{bound} 3000.0\n"
+    assert stored.read_text() == held
