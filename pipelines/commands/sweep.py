@@ -18,7 +18,7 @@ from pipelines.commands.sweep_plan import check_iterations_recorded, check_world
 from pipelines.errors import PipelineError, SweepStopped
 
 if TYPE_CHECKING:
-    from pipelines.commands.sweep_report import LogRead
+    from pipelines.commands.sweep_log_read import LogRead
     from pipelines.config import RunConfig
     from pipelines.experiments.sweep_config import SweepConfig
 
@@ -74,14 +74,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.commands.sweep_report import (
-        INTERRUPTED,
-        LogRead,
-        recorded_plan,
-        report,
-        report_stopped,
-        run_cells,
-    )
+    from pipelines.commands.sweep_log_read import LogRead
+    from pipelines.commands.sweep_report import recorded_plan, report, report_stopped
+    from pipelines.commands.sweep_run import INTERRUPTED, run_cells
     from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
     from pipelines.loop.interrupt import stop_status
 

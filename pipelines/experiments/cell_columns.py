@@ -4,7 +4,7 @@ The report used to hold every record of the log as a parsed dict (3.7 KB an epis
 4.1 GB at a million episodes, benchmarks/sweep_log_scale.py). ``CellColumns`` keeps, of each record, only the
 fields the cell's summary reads (pipelines.experiments.summary), each in a machine array while its values are
 of the array's kind (a float, an integer, a boolean, or null), and where the record's line lies in the log
-(episodes.csv reads the lines again, one at a time: pipelines.commands.sweep_report). A column whose values
+(episodes.csv reads the lines again, one at a time: pipelines.commands.sweep_log_read). A column whose values
 stop fitting its array (a float where an integer was, an integer past 64 bits) becomes a plain list, so that
 every value reads back exactly as the record held it, and every figure of the report is the same.
 """

@@ -211,7 +211,7 @@ def write_report_of(
 ) -> Report:
     """``write_report`` of the cells' ``summaries`` and episodes.csv's ``rows`` (``episode_row``'s, in the
     plan's order): a report that reads a sweep's log once more for the rows rather than holding its records
-    (pipelines.commands.sweep_report). ``note``: a paragraph after table.md's table."""
+    (pipelines.commands.sweep_log_read). ``note``: a paragraph after table.md's table."""
     from pipelines.experiments.worker import remove_stale_scratch
 
     out = Path(out)

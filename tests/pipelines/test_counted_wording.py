@@ -34,7 +34,7 @@ def test_a_history_of_the_wrong_shape_counts_one_robot_and_one_human():
 
 
 def test_a_sweeps_notes_on_cells_of_one_human_count_it_so():
-    from pipelines.commands.sweep_report import not_counted_note
+    from pipelines.commands.sweep_table_notes import not_counted_note
 
     cell = types.SimpleNamespace(key="c", method="CMPC", n_humans=1)
     tasks = [types.SimpleNamespace(cell=cell) for _ in range(4)]

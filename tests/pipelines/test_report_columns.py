@@ -1,5 +1,5 @@
 """A sweep's report read from its log a record at a time (pipelines.experiments.cell_columns,
-pipelines.commands.sweep_report.read_log): the same files as the report of the records held whole, in memory
+pipelines.commands.sweep_log_read.read_log): the same files as the report of the records held whole, in memory
 that does not grow by a record's size per episode; and a resume's checks (pipelines.experiments.resume_checks)
 read the same way."""
 
@@ -17,7 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from pipelines.commands.sweep_report import code_note, read_log, report
+from pipelines.commands.sweep_log_read import read_log
+from pipelines.commands.sweep_report import report
+from pipelines.commands.sweep_table_notes import code_note
 from pipelines.errors import PipelineError
 from pipelines.experiments import log as log_module
 from pipelines.experiments.cell_columns import COUNTS, FLAGS, FLOATS, Column
@@ -153,7 +155,7 @@ def test_a_log_replaced_while_the_report_reads_it_is_refused(tmp_path):
     config = _multiplied(_sweep(tmp_path / "seed"), tmp_path / "log", 3)
     cells = config.experiment.cells(config.humans, config.n_robots)
     log = read_log(config, cells, config.tasks())
-    from pipelines.commands.sweep_report import episode_rows
+    from pipelines.commands.sweep_log_read import episode_rows
 
     path = config.out / EPISODES_FILE
     path.write_bytes(path.read_bytes().replace(b'"success":true', b'"success":fals', 1))
@@ -229,7 +231,7 @@ def test_a_resume_names_the_first_planned_episode_whose_margins_changed_whatever
 
 def test_episodes_csv_of_a_log_lists_a_cell_named_twice_once_as_of_records_held_whole(tmp_path):
     """report.episode_rows sorts by a cell's place (its last) and labels it with its last label."""
-    from pipelines.commands.sweep_report import episode_rows
+    from pipelines.commands.sweep_log_read import episode_rows
     from pipelines.experiments.report import episode_rows as held_rows
 
     config = _multiplied(_sweep(tmp_path / "seed"), tmp_path / "log", 3, shuffle=True)

@@ -307,7 +307,7 @@ def test_the_report_holds_no_record_but_columns_of_what_it_reads(tmp_path):
     keeps, of each, its summary's fields in machine arrays and where its line lies in the log."""
     from array import array
 
-    from pipelines.commands.sweep_report import read_log
+    from pipelines.commands.sweep_log_read import read_log
 
     config = SweepConfig(
         get_experiment("baselines"), tmp_path, 2, humans=(3,), backend="inline", progress=False

@@ -104,7 +104,7 @@ def test_the_refusal_comes_before_any_worker(tmp_path, capsys, monkeypatch):
     def no_workers(*args, **kwargs):
         raise AssertionError("the sweep ran before its choices were checked")
 
-    monkeypatch.setattr("pipelines.commands.sweep_report.run_cells", no_workers)
+    monkeypatch.setattr("pipelines.commands.sweep_run.run_cells", no_workers)
     out = tmp_path / "sw"
     sweep = ["sweep", "--experiment", "baselines", "--crowd", "eth_test", "--visibility", "visible"]
     assert main([*sweep, "--humans", "3", "--backend", "inline", "--out", str(out)]) == 2

@@ -344,7 +344,7 @@ def test_the_note_of_episodes_not_counted_names_at_most_eight_cells():
     recorded is not named, and a plan fully recorded has no note."""
     import types
 
-    from pipelines.commands.sweep_report import not_counted_note
+    from pipelines.commands.sweep_table_notes import not_counted_note
 
     cells = tuple(types.SimpleNamespace(key=f"c{i}", method=f"M{i}", n_humans=5) for i in range(11))
     tasks = [types.SimpleNamespace(cell=c) for c in cells for _ in range(4)]

@@ -32,7 +32,7 @@ def test_the_table_names_the_code_of_its_runs(tmp_path, capsys):
 def test_the_table_names_only_the_code_of_the_runs_it_tabulates(tmp_path, capsys):
     """A run that made none of the tabulated episodes (a resume with nothing left to run, or one whose cells
     another --set made new) was named all the same: "2 versions" behind a table of one run's episodes."""
-    from pipelines.commands.sweep_report import code_note
+    from pipelines.commands.sweep_table_notes import code_note
 
     out = tmp_path / "s"
     assert main([*ARGV, "--episodes-per-cell", "1", "--out", str(out)]) == 0
