@@ -26,7 +26,7 @@ import os
 import shlex
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from predictors.checkpoint import CheckedPair, read_checkpoint
 from predictors.errors import CheckpointMismatch, PredictorError
@@ -38,6 +38,8 @@ from predictors.manifest import (
 )
 
 if TYPE_CHECKING:
+    from collections.abc import Mapping
+
     from predictors.learned import LearnedPredictor
 
 CHECKPOINTS_ENV: Final[str] = "CROWDMPC_CHECKPOINTS"
@@ -229,7 +231,26 @@ def read_located(located: Located, name: str | None = None) -> CheckedPair:
         name=name or located.entry.name,
         expected_sha256=located.entry.sha256,
         expected_config_sha256=located.entry.config_sha256,
+        check_config=lambda document: check_kind(located, document),
     )
+
+
+def check_kind(located: Located, document: Mapping[str, Any]) -> None:
+    """Refuse the entry ``located`` whose config ``document`` (its bytes the entry's) names a model kind that
+    nothing registers (a plugin's, without ``--plugin``), naming the entry, its manifest, the kind and how to
+    register it. Every command that loads a zoo entry refuses it here in one line: simulate, evaluate,
+    export and calibrate named the config file alone, the sweep the entry and its zoo. The config's kind, as
+    loading builds it; its manifest's is informational (``zoo verify`` compares them)."""
+    from predictors.models import UnknownModel, model_kind
+
+    model = document.get("model")
+    if not isinstance(model, str):
+        return  # a legacy or malformed config: read_checkpoint's own words
+    try:
+        model_kind(model)
+    except UnknownModel as exc:
+        where = f"predictor {located.entry.name!r} of the {located.source} zoo ({located.manifest})"
+        raise PredictorError(f"{where}: {exc}") from None
 
 
 def load_zoo(name: str, directory: str | Path | None = None) -> LearnedPredictor:

@@ -64,7 +64,6 @@ def read_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None 
     12 times and calibrations.json 10 times (an unknown name: twice, 22 times with those margins)."""
     from predictors import zoo
     from predictors.errors import PredictorError
-    from predictors.models import model_kind
     from predictors.registry import PREDICTORS
 
     chosen_by = chosen_by or {}
@@ -100,10 +99,8 @@ def read_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None 
         try:
             loaded[name] = zoo.load_located(located)  # what every worker would do first, and fail at
         except (PipelineError, PredictorError) as exc:
-            try:  # a kind no plugin registers is said as the entry's (the config's, if it loaded, built it)
-                model_kind(located.entry.model)
-            except PredictorError as unknown:
-                refused = PipelineError(f"{where}predictor {name!r} of the {located.source} zoo: {unknown}")
-                return PlanModels(loaded, found, refused=refused)
+            # a kind no plugin registers: the load's own line, naming the entry (zoo.check_kind), as
+            # simulate's; an entry's kind looked up here had a manifest edited to an unknown kind said
+            # instead of why its files did not load
             return PlanModels(loaded, found, refused=PipelineError(f"{where}{exc}") if where else exc)
     return PlanModels(loaded, found)

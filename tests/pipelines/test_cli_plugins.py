@@ -93,11 +93,7 @@ def test_a_new_process_loads_a_plugin_model_only_with_the_plugin_registered(tmp_
     export = [sys.executable, "-m", "pipelines.cli", "export", "toy_walk", "--out", str(tmp_path / "x")]
     done = subprocess.run(export, cwd=REPO, env=env, capture_output=True, text=True)
     assert done.returncode == 2 and done.stdout == ""
-    assert done.stderr == (
-        f'crowdmpc export: error: {user_zoo_dir() / "toy_walk.json"}: "model": model {TOY!r} is a plugin '
-        f"that is not registered; register it with `crowdmpc --plugin {TOY} COMMAND ...` or "
-        f"{PLUGINS_ENV}={TOY}\n"
-    )
+    assert done.stderr == _no_plugin_line("export") + "\n"
 
 
 def _toy_checkpoint(tmp_path: Path) -> Path:
@@ -115,6 +111,16 @@ def _toy_checkpoint(tmp_path: Path) -> Path:
     )
     (tmp_path / "run" / "toy.metrics.json").write_text("{}")
     return weights
+
+
+def _no_plugin_line(command: str) -> str:
+    """The one line ``command`` refuses the user zoo's toy_walk with, its plugin not registered."""
+    manifest = user_zoo_dir() / "manifest.json"
+    return (
+        f"crowdmpc {command}: error: predictor 'toy_walk' of the user zoo ({manifest}): model {TOY!r} is a "
+        f"plugin that is not registered; register it with `crowdmpc --plugin {TOY} COMMAND ...` or "
+        f"{PLUGINS_ENV}={TOY}"
+    )
 
 
 # ------------------------------------------------------------------------------------------- bad plugins
@@ -249,11 +255,36 @@ def test_the_sweep_refuses_a_plugin_model_whose_plugin_is_not_registered(tmp_pat
         capsys, "sweep", "--experiment", "predictors", "--predictors", "constant_velocity,toy_walk",
         "--backend", "inline", "--out", str(tmp_path / "sweep"),
     )  # fmt: skip
-    assert code == 2 and one_line(err) == (
-        f"crowdmpc sweep: error: predictor 'toy_walk' of the user zoo: model {TOY!r} is a plugin that is not "
-        f"registered; register it with `crowdmpc --plugin {TOY} COMMAND ...` or {PLUGINS_ENV}={TOY}"
-    )
+    assert code == 2 and one_line(err) == _no_plugin_line("sweep")
     assert not (tmp_path / "sweep" / "episodes.jsonl").exists()
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ("simulate", "--controller", "cmpc", "--predictor", "toy_walk", "--humans", "2", "--robots", "1",
+         "--no-progress"),
+        ("sweep", "--experiment", "predictors", "--predictors", "constant_velocity,toy_walk", "--backend",
+         "inline", "--dry-run"),
+        ("evaluate", "--predictor", "toy_walk", "--no-progress"),
+        ("export", "toy_walk"),
+        ("calibrate", "--predictor", "toy_walk", "--source", "real", "--dry-run", "--no-progress"),
+    ],
+    ids=lambda argv: argv[0],
+)  # fmt: skip
+def test_every_command_refuses_a_plugin_model_without_its_plugin_in_one_line(
+    argv, tmp_path, monkeypatch, capsys
+):
+    """Each loaded the entry and named its config file alone (".../toy_walk.json: "model": ..."), where the
+    sweep named the entry and its zoo: one check now, naming the entry, its manifest, the kind and how to
+    register it."""
+    weights = _toy_checkpoint(tmp_path)
+    assert main(["--plugin", TOY, "zoo", "add", str(weights), "--name", "toy_walk"]) == 0
+    monkeypatch.setattr(models, "_PLUGINS", {})  # a new process, without --plugin
+    monkeypatch.delenv(PLUGINS_ENV)
+    out = ["--out", str(tmp_path / ("x.casadi" if argv[0] == "export" else "sweep"))]
+    code, _, err = run(capsys, *argv, *(out if argv[0] in ("export", "sweep") else ()))
+    assert code == 2 and one_line(err) == _no_plugin_line(argv[0])
 
 
 # ------------------------------------------------------------------------------------------- --predictors

@@ -363,8 +363,8 @@ def test_a_plugin_model_goes_through_the_user_zoo(tmp_path, shipped, user, monke
     with pytest.raises(PredictorError) as refused:
         load_predictor("toy_eth")
     assert str(refused.value) == (
-        f'{user / "toy_eth.json"}: "model": model {TOY!r} is a plugin that is not registered; register it '
-        f"with `crowdmpc --plugin {TOY} COMMAND ...` or CROWDMPC_PLUGINS={TOY}"
+        f"predictor 'toy_eth' of the user zoo ({user / 'manifest.json'}): model {TOY!r} is a plugin that is "
+        f"not registered; register it with `crowdmpc --plugin {TOY} COMMAND ...` or CROWDMPC_PLUGINS={TOY}"
     )
 
 
