@@ -5,18 +5,26 @@ processes (or Ray actors on other machines), load it again from the zoo as they 
 `zoo add --replace` in between (a model retrained into the zoo while a sweep runs) had them run, and record,
 other weights than were checked, and a table mix two predictors under one name. The driver hands each task
 the sha256 of the weights it checked (``with_checked_weights``); a worker refuses a controller that loaded
-others (``check_loaded_weights``), as an episode error naming the file, before any episode runs on them.
+others (``check_loaded_weights``) before any episode runs on them, and the driver stops the sweep at that
+first refusal (``WeightsReplaced``), in one line naming the file: every later episode of the predictor met the
+same refusal, each an entry of errors.jsonl, and the sweep ran on with nothing of them to record.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Iterable, Mapping
+from pathlib import Path
 
 from pipelines.errors import PipelineError
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.loop.contract import checked_description
 from pipelines.loop.controllers import Controller
+
+
+class WeightsReplaced(PipelineError):
+    """A worker's controller loaded other weights than the sweep's driver checked: no episode error (a rerun
+    with those weights is refused, pipelines.experiments.resume_checks), but the end of the sweep."""
 
 
 def zoo_weights(tasks: Iterable[EpisodeTask]) -> dict[str, str]:
@@ -43,7 +51,7 @@ def with_checked_weights(tasks: list[EpisodeTask], weights: Mapping[str, str | N
 
 
 def check_loaded_weights(task: EpisodeTask, controller: Controller) -> None:
-    """PipelineError, in one line naming the weights file, when ``controller`` (built for ``task``'s cell)
+    """WeightsReplaced, in one line naming the weights file, when ``controller`` (built for ``task``'s cell)
     loaded other weights than the driver checked (``task.weights_sha256``); a controller that states no
     weights (a baseline, a plugin's describing none) is not checked."""
     expected = task.weights_sha256
@@ -53,12 +61,22 @@ def check_loaded_weights(task: EpisodeTask, controller: Controller) -> None:
     if loaded is None or loaded == expected:
         return
     name = task.cell.spec.predictor_name
-    raise PipelineError(
+    raise WeightsReplaced(
         f"predictor {name!r}: the weights {_weights_file(name)} have sha256 {loaded}, not the {expected} "
         "this sweep checked before its workers started (replaced in the zoo since, `zoo add --replace`?); "
         "no episode runs on them: sweep the new weights into another --out, or put the checked ones back "
         "and rerun to resume"
     )
+
+
+def stopped_by(refusal: str, recorded: int, out: Path) -> str:
+    """The line a sweep stops with at a worker's ``refusal`` (``WeightsReplaced``'s), ``recorded`` episodes
+    of its plan in ``out``'s log: they are kept, and a rerun with the checked weights back runs the rest."""
+    if recorded == 0:
+        kept = f"no episode of it is recorded in {out} yet"
+    else:
+        kept = f"the {recorded} episode{'s' if recorded > 1 else ''} recorded in {out} kept"
+    return f"{refusal} (the sweep stopped at the first episode that loaded them, {kept})"
 
 
 def _weights_file(name: str | None) -> str:

@@ -31,7 +31,7 @@ from typing import Any, Final
 
 from pipelines.errors import PipelineError, SweepStopped
 from pipelines.experiments.backends import Backend, check_backend, make_backend
-from pipelines.experiments.checked_weights import with_checked_weights, zoo_weights
+from pipelines.experiments.checked_weights import stopped_by, with_checked_weights, zoo_weights
 from pipelines.experiments.log import (
     ERRORS_FILE,
     SWEEP_FILE,
@@ -297,7 +297,8 @@ def _run_tasks(
     with that number as its ``run``, and end the backend. Stop (SweepStopped) when no episode has run and
     FAIL_FAST_ERRORS episodes not ``retried`` (keys that raised in an earlier run) have raised: a broken
     method or setting, also when it extends a sweep; old failures raising again tell nothing new, and run
-    after the new episodes."""
+    after the new episodes. Stop too at a worker's ``stop`` (weights replaced since the driver checked them):
+    every later episode of that predictor met it, one error each."""
     out = Path(config.out)
     by_key = {t.key: t for t in todo}
     start = time.perf_counter()
@@ -314,6 +315,8 @@ def _run_tasks(
                 raise PipelineError(
                     f"{backend.name} backend returned episode {result.key!r}, which it was not given"
                 )
+            if result.stop is not None:  # not written to errors.jsonl: no episode of it ran
+                raise SweepStopped(stopped_by(result.stop, outcome.already_done + outcome.ran, out))
             if result.error is not None:
                 outcome.errors.append(result.key)
                 _append_error(out, task, result.error)

@@ -5,7 +5,9 @@ once and reuses it for every episode of that cell it gets (tasks come interleave
 index by episode index, in groups of at most CONTROLLER_CACHE cells: Experiment.tasks), and returns a
 JSON-ready record (plus the MCAP bytes of a kept log) to the driver. A failing episode (an exception in the
 controller) does not stop the sweep: the worker hands back its traceback,
-which the driver writes to ``<out>/errors.jsonl`` and not to the records, so a rerun tries it again.
+which the driver writes to ``<out>/errors.jsonl`` and not to the records, so a rerun tries it again. A
+controller that loaded other weights than the driver checked (pipelines.experiments.checked_weights) is no
+episode's failure: the worker hands back the refusal's line as ``stop``, and the driver stops the sweep.
 
 Recording (``--record failures|all``) happens *during* the run: the worker records every episode to a scratch
 file and keeps it only when the policy asks. Re-running a failure afterwards would be cheaper, but an episode
@@ -32,7 +34,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError, interrupt_behind
-from pipelines.experiments.checked_weights import check_loaded_weights
+from pipelines.experiments.checked_weights import WeightsReplaced, check_loaded_weights
 from pipelines.experiments.deadline import EpisodeTimeout, check_timeout, deadline, timeout_error
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.loop.contract import checked_description, episode_config
@@ -216,12 +218,14 @@ def cell_config(controller: Controller, env_config: EnvConfig) -> dict[str, Any]
 
 @dataclass
 class EpisodeOutcome:
-    """What a worker hands back: a record, or the error that stopped the episode; a kept MCAP log."""
+    """What a worker hands back: a record, or the error that stopped the episode, or the refusal that stops
+    the sweep (``stop``: its one line); a kept MCAP log."""
 
     key: str
     record: dict[str, Any] | None = None
     error: str | None = None
     mcap: bytes | None = None
+    stop: str | None = None
 
 
 class EpisodeWorker:
@@ -314,6 +318,8 @@ class EpisodeWorker:
             self._drop(task.cell.key, close=False)
             assert self.timeout_s is not None  # only a limit raises it
             return EpisodeOutcome(task.key, error=timeout_error(self.timeout_s, traceback.format_exc()))
+        except WeightsReplaced as exc:  # every later episode of the predictor would refuse: the sweep's
+            return EpisodeOutcome(task.key, stop=str(exc))
         except Exception as exc:  # a bug or a solver crash in one episode must not end a sweep of thousands
             interrupt = interrupt_behind(exc)
             if interrupt is not None:  # Ctrl-C in CasADi (inline sweeps): the sweep's, not the episode's

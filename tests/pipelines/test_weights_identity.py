@@ -17,6 +17,7 @@ import torch
 from crowdsim.world import OBS_LEN
 from pipelines.cli import main
 from pipelines.errors import PipelineError
+from predictors.zoo_edit import add_to_zoo
 from tests.pipelines.mcap_episode import record_episode
 
 CHECKPOINTS = Path(__file__).resolve().parents[2] / "checkpoints"
@@ -235,13 +236,33 @@ def test_real_calibration_names_the_weights_it_measured_when_they_are_replaced_m
     assert block["predictor_sha256"] == replaced[0].sha256
 
 
+SWEEP_MINE = ["sweep", "--experiment", "table2", "--predictor", "mine", "--robots", "1", "--no-progress"]
+SWEEP_MINE += ["--backend", "inline", "--set", "env.time_limit=2"]
+
+
+def _refusal(out: Path, weights: Path, replaced: str, checked: str, recorded: int) -> str:
+    """The line a sweep stops with when a worker loaded ``replaced`` weights where it checked ``checked``."""
+    kept = (
+        f"no episode of it is recorded in {out} yet"
+        if recorded == 0
+        else f"the {recorded} episode{'s' if recorded > 1 else ''} recorded in {out} kept"
+    )
+    return (
+        f"predictor 'mine': the weights {weights} have sha256 {replaced}, not the {checked} this sweep "
+        "checked before its workers started (replaced in the zoo since, `zoo add --replace`?); no episode "
+        "runs on them: sweep the new weights into another --out, or put the checked ones back and rerun to "
+        f"resume (the sweep stopped at the first episode that loaded them, {kept})"
+    )
+
+
 def test_a_sweeps_workers_refuse_weights_replaced_after_the_driver_checked_them(
     tmp_path, monkeypatch, capsys
 ):
     """A sweep's workers load each predictor again after the driver checked it (processes): a `zoo add
     --replace` in between (retraining into the zoo during a sweep) had every episode run, and be recorded,
-    with other weights than the sweep checked. Each worker now refuses them, naming the file, and no episode
-    of them is recorded."""
+    with other weights than the sweep checked. The first worker to load them refuses them, naming the file,
+    and the sweep stops there in that one line: no episode of them is recorded, nor written to errors.jsonl
+    (each was, one by one)."""
     from pipelines.experiments import sweep
     from predictors import zoo
 
@@ -250,18 +271,39 @@ def test_a_sweeps_workers_refuse_weights_replaced_after_the_driver_checked_them(
     # as the run starts: after check_plan loaded the weights, before any worker does
     replaced = _replace_at_call(monkeypatch, sweep, "make_scratch_root", 1, new_weights, **options)
     out = tmp_path / "sweep"
-    plan = ["--experiment", "table2", "--predictor", "mine", "--humans", "2", "--robots", "1"]
-    plan += ["--episodes-per-cell", "1", "--backend", "inline", "--set", "env.time_limit=2"]
-    main(["sweep", *plan, "--no-progress", "--out", str(out)])
+    argv = [*SWEEP_MINE, "--humans", "2", "--episodes-per-cell", "1", "--out", str(out)]
+    assert main(argv) == 2
     assert replaced and replaced[0].sha256 != checked
     log = out / "episodes.jsonl"
     assert not log.exists() or not log.read_text().strip()  # no episode of the new weights recorded
-    errors = [json.loads(line) for line in (out / "errors.jsonl").read_text().splitlines()]
-    assert len(errors) == 2  # CMPC's and DMPC's episode
-    last = errors[0]["error"].strip().splitlines()[-1]
-    assert last == (
-        f"pipelines.errors.PipelineError: predictor 'mine': the weights {user / 'mine.pt'} have sha256 "
-        f"{replaced[0].sha256}, not the {checked} this sweep checked before its workers started (replaced "
-        "in the zoo since, `zoo add --replace`?); no episode runs on them: sweep the new weights into "
-        "another --out, or put the checked ones back and rerun to resume"
-    )
+    assert not (out / "errors.jsonl").exists()
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err == "crowdmpc sweep: error: " + _refusal(out, user / "mine.pt", replaced[0].sha256, checked, 0)
+
+
+def test_a_sweep_stops_at_weights_replaced_mid_way_and_a_rerun_with_the_checked_ones_resumes(
+    tmp_path, monkeypatch, capsys
+):
+    """Weights replaced once some episodes are recorded: a worker's cell whose controller was built already
+    ran on (on the weights checked), and every episode of the cells it built after failed, each its own
+    entry in errors.jsonl (33 of a 60-episode sweep, `--workers 2`, replaced after the first record). The
+    sweep now stops at the first refusal, the episodes recorded kept; with the checked weights back, a
+    rerun of the same command runs the rest."""
+    from pipelines.experiments.log import EpisodeLog
+    from predictors import zoo
+
+    options, user, new_weights = _calibrate_zoo(tmp_path)
+    checked = zoo.locate("mine").entry.sha256
+    replaced = _replace_at_call(monkeypatch, EpisodeLog, "append", 1, new_weights, after=True, **options)
+    out = tmp_path / "sweep"
+    argv = [*SWEEP_MINE, "--humans", "2,3", "--episodes-per-cell", "2", "--out", str(out)]
+    assert main(argv) == 2  # 4 cells, an episode of each in turn: the second cell's controller refuses
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err == "crowdmpc sweep: error: " + _refusal(out, user / "mine.pt", replaced[0].sha256, checked, 1)
+    first = (out / "episodes.jsonl").read_text()
+    assert len(first.splitlines()) == 1 and not (out / "errors.jsonl").exists()
+    add_to_zoo(tmp_path / "old" / "mine.pt", **options, replace=True)  # the checked weights back
+    assert main(argv) == 0
+    held = (out / "episodes.jsonl").read_text()
+    assert held.startswith(first) and len(held.splitlines()) == 8
+    assert {json.loads(line)["predictor_sha256"] for line in held.splitlines()} == {checked}
