@@ -112,8 +112,7 @@ def run(args: argparse.Namespace) -> int:
         # log is read once (and its planned lines once more, by offset, for episodes.csv), not scanned again
         log = LogRead.of_plan(cells, tasks)
         try:
-            weights = None if models is None else models.weights()  # the workers load those checked
-            status = run_cells(config, log, weights)
+            status = run_cells(config, log, models)  # the workers load the weights checked, and their blocks
         except SweepStopped:
             report_stopped(config, cells, tasks, log)  # what it recorded stands
             raise

@@ -12,6 +12,7 @@ if TYPE_CHECKING:
     from collections.abc import Mapping
 
     from pipelines.experiments.cells import Experiment
+    from pipelines.experiments.checked_calibrations import Checked
     from pipelines.loop.margins_read import Planned
     from predictors.base import Predictor
     from predictors.errors import PredictorError
@@ -37,6 +38,13 @@ class PlanModels(NamedTuple):
         from predictors.registry import loaded_sha256
 
         return {name: loaded_sha256(model) for name, model in self.loaded.items()}
+
+    def calibrations(self) -> Checked | None:
+        """The block each method plans with, by label, which a sweep's workers plan with and its resume
+        checks the records against (pipelines.experiments.checked_calibrations); None: not looked up."""
+        from pipelines.experiments.checked_calibrations import checked_blocks
+
+        return None if self.blocks is None else checked_blocks(self.blocks)
 
 
 def check_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None = None) -> PlanModels:

@@ -4,13 +4,13 @@ do after an interrupt, with the exit status that says it."""
 from __future__ import annotations
 
 import sys
-from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 from pipelines.errors import EPISODES_RAISED
 
 if TYPE_CHECKING:
     from pipelines.commands.sweep_log_read import LogRead
+    from pipelines.commands.sweep_predictors import PlanModels
     from pipelines.experiments.sweep_config import SweepConfig
 
 # a sweep stopped by Ctrl-C or SIGTERM; it exits with stop_status() (143 for SIGTERM: loop.interrupt)
@@ -39,16 +39,15 @@ def _recorded(config: SweepConfig) -> int:
     return sum(record["key"] in planned for _, _, record in episode_log(config.out).scan(repair=False))
 
 
-def run_cells(
-    config: SweepConfig, log: LogRead | None = None, weights: Mapping[str, str | None] | None = None
-) -> int:
+def run_cells(config: SweepConfig, log: LogRead | None = None, models: PlanModels | None = None) -> int:
     """Runs the episodes not yet recorded and says how it went; returns the exit status (EPISODES_RAISED: some
     episodes raised, INTERRUPTED). ``log``: given every record of the log, those held and those this run
-    appends; ``weights``: ``run_sweep``'s, the weights the plan's checks loaded."""
+    appends; ``models``: the plan's checks' reads, whose weights and calibration blocks the workers take."""
     from pipelines.experiments.sweep import run_sweep
 
-    status = 0
-    outcome = run_sweep(config, records=None if log is None else log.add, weights=weights)
+    status, records = 0, None if log is None else log.add
+    weights, blocks = (None, None) if models is None else (models.weights(), models.calibrations())
+    outcome = run_sweep(config, records=records, weights=weights, calibrations=blocks)
     if outcome.interrupted:  # the log's own count: a SIGTERM between a record's append and its count
         outcome.ran = _recorded(config) - outcome.already_done
     done = outcome.already_done + outcome.ran

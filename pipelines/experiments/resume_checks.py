@@ -19,7 +19,11 @@ from pipelines.experiments.tasks import Cell, EpisodeTask
 from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
-    from pipelines.loop.margins import InForce, MarginSpec
+    from types import EllipsisType
+
+    from pipelines.experiments.checked_calibrations import Checked
+    from pipelines.loop.margins import InForce, Located, MarginSpec
+    from pipelines.loop.margins_read import CheckedBlock
 
 
 def read_recorded(
@@ -29,12 +33,13 @@ def read_recorded(
     *,
     repair: bool = False,
     records: Callable[[int, bytes, dict[str, Any]], None] | None = None,
+    calibrations: Checked | None = None,
 ) -> ResumeChecks:
     """Which of ``tasks`` the log of ``out`` holds, as a resume reads it (a record at a time, a bar when
     ``progress``) and checked (``ResumeChecks.check``): what a resume runs is the rest. ``repair``: cut a torn
     last line off the log (only the sweep holding its lock may); ``records``: called with each record as
-    ``EpisodeLog.scan`` gives it."""
-    recorded = ResumeChecks(out, tasks)
+    ``EpisodeLog.scan`` gives it; ``calibrations``: ``ResumeChecks``'."""
+    recorded = ResumeChecks(out, tasks, calibrations=calibrations)
     for offset, line, record in episode_log(out).scan_shown(progress, repair=repair):
         recorded.add(record)
         if records is not None:
@@ -51,10 +56,20 @@ class ResumeChecks:
     while the log is read, the plan's index by key: a resume of 100,000 recorded episodes with nothing left
     to run (benchmarks/sweep_log_scale.py's) peaked at 256 MB, now 154 MB."""
 
-    def __init__(self, out: Path, tasks: list[EpisodeTask], *, reused: bool = False):
+    def __init__(
+        self,
+        out: Path,
+        tasks: list[EpisodeTask],
+        *,
+        reused: bool = False,
+        calibrations: Checked | None = None,
+    ):
         """``reused``: ``out`` is another sweep's folder whose records ``sweep --reuse`` would take
-        (pipelines.experiments.reuse), not the folder this sweep extends."""
+        (pipelines.experiments.reuse), not the folder this sweep extends. ``calibrations``: the block of each
+        method as the sweep hands it to its workers (``run_sweep``'s), which a cell's records are checked
+        against (a method not there: its block looked up here)."""
         self.out = out
+        self._calibrations = calibrations or {}
         self.reused = reused
         self.tasks = tasks
         self._index = {t.key: i for i, t in enumerate(tasks)}
@@ -152,7 +167,8 @@ class ResumeChecks:
         for i, stored, made in sorted(self._margins.values(), key=lambda first: first[0]):
             key = self.tasks[i].cell.key
             if key not in current:
-                current[key] = planned_margins(self.tasks[i].cell, in_force)
+                cell = self.tasks[i].cell
+                current[key] = planned_margins(cell, in_force, self._calibrations.get(cell.method, ...))
             if stored != current[key]:
                 raise PipelineError(
                     f"{log} holds episodes of {key} planned with {_margins_change(stored, current[key])}: "
@@ -263,30 +279,41 @@ def _keep_first(firsts: dict[Any, tuple[Any, ...]], key: Any, value: tuple[Any, 
         firsts[key] = value
 
 
-def planned_margins(cell: Cell, blocks: Callable[[], InForce] | None = None) -> dict[str, Any]:
+def planned_margins(
+    cell: Cell,
+    blocks: Callable[[], InForce] | None = None,
+    handed: CheckedBlock | None | EllipsisType = ...,
+) -> dict[str, Any]:
     """The margins ``cell``'s MPC plans with now, as its records state them (MPCController.describe's
     "margins": the same for every human, and per motion class), in their JSON form; ``blocks``:
-    ``margins_planned``'s."""
+    ``margins_planned``'s; ``handed``: the block its workers plan with (``...``: none handed, looked up)."""
     from pipelines.loop.mpc_setup import mpc_config
 
     spec = cell.spec.behind(cell.world.sensor_range, cell.world.sensor_tracks)  # as the worker builds it
     horizon = mpc_config(spec, world=cell.world.env_config().world()).horizon
-    return margins_planned(spec.margins, spec.predictor_name, horizon, blocks)
+    at = ... if handed is ... else None if handed is None else handed.located()
+    return margins_planned(spec.margins, spec.predictor_name, horizon, blocks, at)
 
 
 def margins_planned(
-    margins: MarginSpec, predictor: str | None, horizon: int, blocks: Callable[[], InForce] | None = None
+    margins: MarginSpec,
+    predictor: str | None,
+    horizon: int,
+    blocks: Callable[[], InForce] | None = None,
+    at: Located | None | EllipsisType = ...,
 ) -> dict[str, Any]:
     """What ``margins`` plan with now for the zoo's ``predictor`` at ``horizon``, in ``planned_margins``'
     form: a resume checks a cell's records against it, and `config show --from-sweep` a remade
     calibration's. ``blocks``: the calibration blocks in force, as ``margins_read.read_once`` read them for
-    every cell (None: read here)."""
+    every cell (None: read here); ``at``: the block the cell's workers plan with (``...``: looked up here)."""
     from pipelines.loop.margins import CALIBRATED_MODES
     from predictors.registry import checkpoint_sha256
 
-    sha256 = checkpoint_sha256(predictor)
-    read = blocks() if blocks is not None and margins.mode in CALIBRATED_MODES else None
-    at = margins.located(predictor, horizon, sha256, read)  # read once, as the controller does
+    sha256 = None  # a block handed (``at``) is the weights' the sweep checked: no manifest read for it
+    if at is ...:
+        sha256 = checkpoint_sha256(predictor)
+        read = blocks() if blocks is not None and margins.mode in CALIBRATED_MODES else None
+        at = margins.located(predictor, horizon, sha256, read)  # read once, as the controller does
     classes = margins.resolve_classes(predictor, horizon, sha256, at)
     planned = {
         "margins_m": list(margins.resolve(predictor, horizon, sha256, at)),

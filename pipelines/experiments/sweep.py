@@ -31,7 +31,8 @@ from typing import Any, Final
 
 from pipelines.errors import PipelineError, SweepStopped
 from pipelines.experiments.backends import Backend, check_backend, make_backend
-from pipelines.experiments.checked_weights import stopped_by, with_checked_weights, zoo_weights
+from pipelines.experiments.checked_calibrations import Checked, checked_inputs, with_checked_calibrations
+from pipelines.experiments.checked_weights import stopped_by, with_checked_weights
 from pipelines.experiments.log import (
     ERRORS_FILE,
     SWEEP_FILE,
@@ -197,6 +198,7 @@ def run_sweep(
     backend_factory: Callable[[SweepConfig, str], Backend] | None = None,
     records: Callable[[int, bytes, dict[str, Any]], None] | None = None,
     weights: Mapping[str, str | None] | None = None,
+    calibrations: Checked | None = None,
 ) -> SweepOutcome:
     """Run every planned episode that ``<out>/episodes.jsonl`` does not hold yet.
 
@@ -207,7 +209,8 @@ def run_sweep(
     resume reads them, then each this run appends (read back from its line): the report of the run
     (``crowdmpc sweep``) needs not read the log again. ``weights``: the sha256 of each zoo predictor's weights
     as the caller checked them (``crowdmpc sweep``: check_plan's loads), which every worker's load must
-    match (pipelines.experiments.checked_weights; None: the zoo's manifests' as the run starts)."""
+    match (pipelines.experiments.checked_weights; None: the zoo's manifests' as the run starts); alike
+    ``calibrations``, each method's calibration block (pipelines.experiments.checked_calibrations)."""
     _refuse_in_worker_start()
     out = Path(config.out)
     if backend_factory is None:  # a choice refused here leaves no folder, nor a line in sweep.json
@@ -224,7 +227,10 @@ def run_sweep(
     with sweep_lock(out, made):
         meta = _sweep_meta(out, config, tasks)
         log = episode_log(out)
-        recorded = read_recorded(out, tasks, config.progress, repair=True, records=records)
+        weights, calibrations = checked_inputs(tasks, weights, calibrations)
+        recorded = read_recorded(
+            out, tasks, config.progress, repair=True, records=records, calibrations=calibrations
+        )
         note = recorded.outside_note()
         if note is not None:
             print(note, file=sys.stderr)
@@ -242,7 +248,7 @@ def run_sweep(
         if not todo:
             add_run()
             return outcome
-        todo = with_checked_weights(todo, zoo_weights(todo) if weights is None else weights)
+        todo = with_checked_calibrations(with_checked_weights(todo, weights), calibrations)
         scratch = make_scratch_root()
         try:
             with terminate_as_interrupt():

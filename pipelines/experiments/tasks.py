@@ -28,7 +28,10 @@ from pipelines.loop.controllers import ControllerSpec
 from predictors.errors import short_repr
 
 if TYPE_CHECKING:
+    from types import EllipsisType
+
     from crowdsim.env_config import EnvConfig
+    from pipelines.loop.margins_read import CheckedBlock
 
 SCENARIOS: Final[tuple[str, str]] = ("circle", "perpendicular")
 # What a sweep's [env] and [env.orca] may set over a cell's profile: what shapes the humans and the episode,
@@ -180,6 +183,9 @@ class EpisodeTask:
     # the sha256 of the cell's predictor's weights as the sweep's driver checked them, which the worker's load
     # must match (pipelines.experiments.checked_weights); None: nothing to check. Not part of the episode
     weights_sha256: str | None = field(default=None, compare=False)
+    # the calibration block of the cell's method as the driver checked it, which the worker's controller plans
+    # with (pipelines.experiments.checked_calibrations); ...: none handed, the controller looks it up itself
+    calibration: CheckedBlock | None | EllipsisType = field(default=..., compare=False, repr=False)
 
     @cached_property
     def key(self) -> str:

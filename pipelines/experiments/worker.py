@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError, interrupt_behind
+from pipelines.experiments.checked_calibrations import controller_reads
 from pipelines.experiments.checked_weights import WeightsReplaced, check_loaded_weights
 from pipelines.experiments.deadline import EpisodeTimeout, check_timeout, deadline, timeout_error
 from pipelines.experiments.tasks import EpisodeTask
@@ -260,9 +261,9 @@ class EpisodeWorker:
 
         cell, world = task.cell, task.cell.world
         env_config = world.env_config()
-        controller = make_controller(
-            cell.spec.behind(world.sensor_range, world.sensor_tracks), env_config, jit=self.jit
-        )
+        spec = cell.spec.behind(world.sensor_range, world.sensor_tracks)
+        # with the calibration block the driver checked, where it handed one: the file is not read again here
+        controller = make_controller(spec, env_config, jit=self.jit, read=controller_reads(task))
         try:  # loaded again here, after the driver checked them: a `zoo add --replace` may have come between
             check_loaded_weights(task, controller)
         except PipelineError:

@@ -6,6 +6,7 @@ conformal:0.37` read manifest.json 13 times and calibrations.json 7 times before
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from pipelines.errors import PipelineError
@@ -126,3 +127,28 @@ def block_of(read: Planned | EllipsisType) -> Calibration | None | EllipsisType:
     """The block the calibration notes describe of a lookup's result (``...``: none made, they look it up)."""
     found = read.found if isinstance(read, Refused) else read
     return found if found is ... or found is None else found[1]
+
+
+@dataclass(frozen=True)
+class CheckedBlock:
+    """A calibration block as a sweep's driver located it, handed to its workers
+    (pipelines.experiments.checked_calibrations): its file, whether that file is the shipped zoo's, and
+    the block. The records name the zoo the block came from (``MarginSpec.calibration``) by its file: a Ray
+    node elsewhere has the package, hence the shipped file, at another path, where the driver's read as a
+    user zoo's."""
+
+    file: Path
+    shipped: bool
+    block: Calibration
+
+    @classmethod
+    def of(cls, at: Located) -> CheckedBlock:
+        from predictors.zoo import is_shipped
+
+        return cls(at[0], is_shipped(at[0].parent), at[1])
+
+    def located(self) -> Located:
+        """The (file, block) a controller plans with here: a shipped block in this machine's shipped file."""
+        from predictors.zoo import checkpoints_dir
+
+        return (checkpoints_dir() / self.file.name if self.shipped else self.file), self.block

@@ -401,7 +401,7 @@ def test_record_failures_keeps_the_mcap_logs_of_failed_episodes(tmp_path):
 
 
 def test_episodes_that_raise_go_to_errors_and_a_broken_setup_stops_early(tmp_path, monkeypatch):
-    def broken(spec, env_config=None, *, jit=False):
+    def broken(spec, env_config=None, *, jit=False, read=None):
         raise RuntimeError("no solver here")
 
     monkeypatch.setattr("pipelines.experiments.worker.make_controller", broken)
@@ -416,7 +416,7 @@ def test_an_error_after_a_torn_entry_of_errors_jsonl_is_an_entry_of_its_own(tmp_
     """errors.jsonl is appended to and never cut: an entry torn by a kill or a full disk took the next
     entry into its line, whose traceback could not be read again, nor its key, which a rerun retries last."""
 
-    def broken(spec, env_config=None, *, jit=False):
+    def broken(spec, env_config=None, *, jit=False, read=None):
         raise RuntimeError("no solver here")
 
     monkeypatch.setattr("pipelines.experiments.worker.make_controller", broken)

@@ -335,7 +335,7 @@ def test_a_new_sweep_whose_few_episodes_all_raised_says_so_without_a_missing_log
     "error: [Errno 2] No such file or directory: .../episodes.jsonl" after pointing at errors.jsonl. The
     errors' line stands alone now, with exit code 1 and a report of no episodes."""
 
-    def broken(spec, env_config=None, *, jit=False):
+    def broken(spec, env_config=None, *, jit=False, read=None):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
     monkeypatch.setattr("pipelines.experiments.worker.make_controller", broken)

@@ -23,7 +23,8 @@ def test_a_sweep_interrupted_after_its_last_episode_says_nothing_is_left(
     """A Ctrl-C that came after "4/4 episodes recorded" printed "rerun the same command to resume"."""
     outcome = SweepOutcome(planned=4, already_done=0, ran=done, backend="process", interrupted=True)
     monkeypatch.setattr(
-        "pipelines.experiments.sweep.run_sweep", lambda config, records=None, weights=None: outcome
+        "pipelines.experiments.sweep.run_sweep",
+        lambda config, records=None, weights=None, calibrations=None: outcome,
     )
     monkeypatch.setattr(sweep_run, "_recorded", lambda config: done)
     config = SimpleNamespace(experiment=SimpleNamespace(name="table2"), out=tmp_path, tasks=lambda: [])
@@ -40,7 +41,8 @@ def test_a_sweep_complete_after_its_retries_says_its_errors_are_recorded_since(t
     )
     outcome = SweepOutcome(planned=2, already_done=1, ran=1, backend="process")
     monkeypatch.setattr(
-        "pipelines.experiments.sweep.run_sweep", lambda config, records=None, weights=None: outcome
+        "pipelines.experiments.sweep.run_sweep",
+        lambda config, records=None, weights=None, calibrations=None: outcome,
     )
     tasks = [SimpleNamespace(key="a"), SimpleNamespace(key="b")]  # "z": another plan's
     config = SimpleNamespace(experiment=SimpleNamespace(name="table2"), out=tmp_path, tasks=lambda: tasks)

@@ -1,0 +1,84 @@
+"""A sweep's workers plan with the calibration blocks its driver checked (pipelines.experiments
+.checked_calibrations): each worker read calibrations.json again as it built a cell's controller, so a
+`calibrate` run between the driver's check and a worker's build had episodes plan with, and record, margins
+nobody checked, caught only by a later resume."""
+
+from __future__ import annotations
+
+from pipelines.cli import main
+from pipelines.experiments.log import episode_log
+from predictors.calibration_store import save_calibration
+from tests.calibration_blocks import class_errors, constant_velocity_block
+from tests.pipelines.test_inputs_read_once import count_opens
+
+SWEEP = ["sweep", "--experiment", "controllers", "--controllers", "cmpc,dmpc", "--predictor",
+         "constant_velocity", "--margins", "conformal:0.1", "--humans", "1,2", "--robots", "1",
+         "--backend", "inline", "--no-progress", "--jit", "off", "--set", "env.time_limit=2"]  # fmt: skip
+
+
+def _recalibrate_at_start(monkeypatch, block) -> list:
+    """``block`` saved (a `calibrate` run) as the sweep's run starts: after the driver's checks looked its
+    margins up, before any worker builds a controller; in the list returned, once it is."""
+    from pipelines.experiments import sweep
+
+    real, saved = sweep.make_scratch_root, []
+
+    def recalibrating():
+        saved.append(save_calibration(block))
+        return real()
+
+    monkeypatch.setattr(sweep, "make_scratch_root", recalibrating)
+    return saved
+
+
+def test_a_sweeps_workers_plan_with_the_margins_its_driver_checked(tmp_path, monkeypatch):
+    errors, _ = class_errors(4)
+    checked = constant_velocity_block(errors)
+    save_calibration(checked)
+    saved = _recalibrate_at_start(monkeypatch, constant_velocity_block(2 * errors))
+    out = tmp_path / "sweep"
+    assert main([*SWEEP, "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    assert saved
+    records = list(episode_log(out).load().values())
+    assert len(records) == 4  # 2 controllers x 2 crowd sizes, each cell's controller built after the save
+    for record in records:
+        margins = record["config"]["margins"]
+        assert margins["margins_m"] == list(checked.quantiles[: len(margins["margins_m"])])
+        assert margins["calibration"]["created"] == checked.created
+
+
+def test_a_sweep_reads_the_calibrations_once(tmp_path, monkeypatch):
+    """Its driver's checks read calibrations.json once for every method; each worker read it again for
+    every cell it built (here, inline: four cells, five reads)."""
+    from predictors import zoo
+
+    save_calibration(constant_velocity_block(class_errors(4)[0]))
+    user = zoo.user_zoo_dir().resolve()
+    opened = count_opens(monkeypatch, "calibrations.json")
+    assert main([*SWEEP, "--episodes-per-cell", "1", "--out", str(tmp_path / "sweep")]) == 0
+    assert opened[user / "calibrations.json"] == 1
+
+
+def test_a_resume_checks_the_records_against_the_margins_its_workers_plan_with(tmp_path, monkeypatch):
+    """The resume check read calibrations.json again after the plan's checks: a calibrate run between the
+    reads refused records of the margins the workers would plan with, or passed records of others."""
+    from pipelines.experiments import sweep
+
+    errors, _ = class_errors(4)
+    checked = constant_velocity_block(errors)
+    save_calibration(checked)
+    out = tmp_path / "sweep"
+    assert main([*SWEEP, "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    real, saved = sweep.read_recorded, []
+
+    def recalibrating(*args, **kwargs):  # after the plan's checks, before the resume's
+        saved.append(save_calibration(constant_velocity_block(2 * errors)))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(sweep, "read_recorded", recalibrating)
+    assert main([*SWEEP, "--episodes-per-cell", "2", "--out", str(out)]) == 0
+    records = list(episode_log(out).load().values())
+    assert saved and len(records) == 8
+    for record in records:
+        margins = record["config"]["margins"]
+        assert margins["margins_m"] == list(checked.quantiles[: len(margins["margins_m"])])
