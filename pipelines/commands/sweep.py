@@ -55,7 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--ray-address",
         metavar="ADDR",
         help="run on this Ray cluster: the address `ray start --head` printed (HOST:6379) or "
-        "ray://HOST:10001 (needs the [cluster] extra); --workers actors, at most one per free CPU there",
+        "ray://HOST:10001 (needs the [cluster] extra); --workers actors, at most one per free CPU there "
+        "(default: $RAY_ADDRESS where set, as ray.init reads it; else, or RAY_ADDRESS=local, a local Ray)",
     )
     p.add_argument(
         "--backend",

@@ -273,7 +273,7 @@ class SweepSettings:
         validation, which holds on every machine: a sweep recorded on a bigger one reads back anywhere
         (``config show --from-sweep``), and the sweep command applies this before it starts workers."""
         workers = self.workers
-        local = self.ray_address is None and self.backend != "inline"
+        local = self.ray_address is None and self.backend != "inline" and not self._joins_ray_address()
         most = local_workers_limit()
         if workers is None or not local or workers <= most:
             return None
@@ -281,6 +281,15 @@ class SweepSettings:
             f"workers {workers}: at most {most} here ({LOCAL_WORKERS_PER_CPU} per CPU this process may use, "
             f"{available_cpus()}); more only queue for the same cores (a Ray cluster takes more)"
         )
+
+    def _joins_ray_address(self) -> bool:
+        """Whether the sweep joins the cluster ``$RAY_ADDRESS`` names, as ray.init does (Ray's backend without
+        --ray-address: pipelines.experiments.ray_join)."""
+        from pipelines.experiments.backends import ray_available
+        from pipelines.experiments.ray_join import address_from_environment
+
+        ray = self.backend == "ray" or (self.backend == "auto" and ray_available())
+        return ray and address_from_environment() is not None
 
     def _check_predictors(self) -> None:
         names = self.predictors

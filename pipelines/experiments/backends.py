@@ -1,7 +1,8 @@
 """Where a sweep's episodes run: the same EpisodeWorker inline, in a process pool, or in Ray actors.
 
 Execution. Ray when it is installed (``pip install -e .[cluster]``): ``ray.init`` starts a local Ray with K
-CPUs, or joins a cluster with ``--ray-address`` (pipelines.experiments.ray_join); K actors each run episodes.
+CPUs, or joins a cluster with ``--ray-address`` or, without it, ``$RAY_ADDRESS`` as ``ray.init`` reads it
+(pipelines.experiments.ray_join); K actors each run episodes.
 Without Ray, K processes of a ``concurrent.futures`` pool (spawn start method: no state forked from the
 driver). Both backends run the same
 ``EpisodeWorker`` (pipelines.experiments.worker) and hand its outcomes back to the driver in completion order;
@@ -27,7 +28,13 @@ from typing import Any, Final, Protocol
 
 from pipelines.errors import PipelineError, SweepStopped, quiet_team_warnings
 from pipelines.experiments.process_backend import CLOSE_GRACE_S, MAX_BREAKS_IN_A_ROW, ProcessBackend
-from pipelines.experiments.ray_join import join_cluster, workers_that_fit
+from pipelines.experiments.ray_join import (
+    RAY_ADDRESS_ENV,
+    address_from_environment,
+    join_cluster,
+    joining_from_environment,
+    workers_that_fit,
+)
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import SINGLE_THREAD_ENV, EpisodeOutcome, EpisodeWorker, worker_scratch
 from predictors.plugin_import import search_listed_folders
@@ -112,9 +119,9 @@ class _RayEpisodeWorker(EpisodeWorker):
 
 
 class RayBackend:
-    """K Ray actors, on a local Ray (K CPUs) or on a cluster (--ray-address); the cluster's nodes need
-    crowdmpc installed like the driver. The driver alone writes the sweep directory, so any node can run
-    episodes."""
+    """K Ray actors, on a local Ray (K CPUs) or on a cluster (--ray-address, $RAY_ADDRESS); the cluster's
+    nodes need crowdmpc installed like the driver. The driver alone writes the sweep directory, so any node
+    can run episodes."""
 
     name = "ray"
 
@@ -139,13 +146,17 @@ class RayBackend:
             # Ray's driver installs its own SIGTERM handler, which aborted a sweep (exit 134, no report)
             # where the other backends stop as at Ctrl-C (pipelines.loop.interrupt): put ours back after
             terminate = signal.getsignal(signal.SIGTERM)
+            given = "--ray-address"
+            if address is None and (address := address_from_environment()) is not None:
+                given = RAY_ADDRESS_ENV  # as ray.init joins it: a `ray job submit` entrypoint's cluster
+                joining_from_environment(address)
             try:
                 if address is None:  # "local": its own Ray, as without a cluster, even beside a `ray start`
-                    # one or under $RAY_ADDRESS, which made ray.init refuse num_cpus in a traceback
+                    # one, where ray.init refused num_cpus in a traceback
                     init = {"num_cpus": workers, "include_dashboard": False, "log_to_driver": False}
                     ray.init(address="local", runtime_env=env, **init)
                 else:
-                    join_cluster(ray, address, env)
+                    join_cluster(ray, address, env, given)
                     try:
                         workers = workers_that_fit(ray, address, workers)
                     except BaseException:  # joined: leave the cluster as a refused join leaves it

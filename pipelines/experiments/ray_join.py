@@ -1,8 +1,8 @@
-"""Joining a Ray cluster (``sweep --ray-address``): what goes wrong there is the user's set-up, not a bug, so
-each failure is one line naming the address (nothing listening at it, a dashboard's URL, a cluster that wants
-an authentication token, Ray's own refusals), a join that takes long says so, and on a cluster with fewer
-free CPUs than workers the sweep runs as many workers as fit. pipelines.experiments.backends' RayBackend
-calls it."""
+"""Joining a Ray cluster (``sweep --ray-address``, or ``$RAY_ADDRESS`` as ``ray.init`` reads it): what goes
+wrong there is the user's set-up, not a bug, so each failure is one line naming the address (nothing
+listening at it, a dashboard's URL, a cluster that wants an authentication token, Ray's own refusals), a join
+that takes long says so, and on a cluster with fewer free CPUs than workers the sweep runs as many workers as
+fit. pipelines.experiments.backends' RayBackend calls it."""
 
 from __future__ import annotations
 
@@ -13,20 +13,38 @@ from typing import Any, Final
 
 from pipelines.errors import PipelineError
 
-_GIVE_ADDRESS: Final[str] = (
-    "give the address that `ray start --head` printed, or leave --ray-address out for a local Ray"
-)
 JOIN_PROBE_S: Final[float] = 10.0  # a cluster's head answers a connection at once; a firewall drops it
 JOIN_NOTE_S: Final[float] = 30.0
+RAY_ADDRESS_ENV: Final[str] = "RAY_ADDRESS"  # what ray.init joins when given no address (Ray's docs)
 
 
-def join_cluster(ray: Any, address: str, env: dict[str, Any]) -> None:
+def address_from_environment() -> str | None:
+    """``$RAY_ADDRESS`` where it names a cluster: a `ray job submit` entrypoint runs under it, and a Ray user
+    sets it to have every driver join that cluster; a sweep that ignored it started a Ray of its own beside
+    the cluster, without a word. None when unset, empty or ``local`` (Ray's word for a Ray of one's own),
+    and for a dashboard's URL: Ray's Jobs docs have it exported for `ray job submit` (no driver joins it),
+    and a sweep beside that export ran on a Ray of its own before it read the variable."""
+    address = os.environ.get(RAY_ADDRESS_ENV, "").strip()
+    dashboard = address.lower().startswith(("http://", "https://"))
+    return None if not address or address.lower() == "local" or dashboard else address
+
+
+def joining_from_environment(address: str) -> None:
+    print(
+        f"note: joining the Ray cluster at {RAY_ADDRESS_ENV}={address!r}, as ray.init does; set "
+        f"{RAY_ADDRESS_ENV}=local (or unset it) for a Ray of this machine's own",
+        file=sys.stderr,
+    )
+
+
+def join_cluster(ray: Any, address: str, env: dict[str, Any], given: str = "--ray-address") -> None:
     """``ray.init`` on a cluster's address; its failures (no cluster there, an address Ray cannot parse) are
     one line naming the address: they are the user's input, not a bug. Ray's client retries a silent port
     for ever, so a host:port is tried first (``_check_answers``), and a join still going after
-    ``JOIN_NOTE_S`` says so rather than wait without a word."""
-    _check_address_kind(address)
-    _check_answers(address)
+    ``JOIN_NOTE_S`` says so rather than wait without a word. ``given``: where the address came from, as the
+    messages name it (the option, or ``RAY_ADDRESS``)."""
+    _check_address_kind(address, given)
+    _check_answers(address, given)
     waiting = threading.Timer(JOIN_NOTE_S, _still_joining, (address,))
     waiting.daemon = True
     waiting.start()
@@ -39,26 +57,31 @@ def join_cluster(ray: Any, address: str, env: dict[str, Any]) -> None:
         ray.init(address=address, runtime_env=env, log_to_driver=False)
     except refused as exc:
         raise PipelineError(
-            f"cannot join a Ray cluster at --ray-address {address!r} ({_first_line(exc)}){_auth_hint(exc)}; "
-            f"{_GIVE_ADDRESS}"
+            f"cannot join a Ray cluster at {given} {address!r} ({_first_line(exc)}){_auth_hint(exc)}; "
+            f"{_give_address(given)}"
         ) from None
     finally:
         waiting.cancel()
 
 
-def _check_address_kind(address: str) -> None:
+def _give_address(given: str) -> str:
+    leave = "set RAY_ADDRESS=local" if given == RAY_ADDRESS_ENV else "leave --ray-address out"
+    return f"give the address that `ray start --head` printed, or {leave} for a local Ray"
+
+
+def _check_address_kind(address: str, given: str) -> None:
     """A dashboard's URL (Ray Jobs' ``http://head:8265``) is no address a driver joins: Ray's refusal of it
     ran to a paragraph."""
     scheme = address.split("://", 1)[0].lower() if "://" in address else None
     if scheme in ("http", "https"):
         raise PipelineError(
-            f"--ray-address {address!r} is a URL of Ray's dashboard (for `ray job submit`), not a cluster a "
+            f"{given} {address!r} is a URL of Ray's dashboard (for `ray job submit`), not a cluster a "
             "sweep joins: give the head's address that `ray start --head` printed (host:6379), or "
             "ray://host:10001 through Ray Client"
         )
 
 
-def _check_answers(address: str) -> None:
+def _check_answers(address: str, given: str) -> None:
     """PipelineError unless ``address``'s host takes a TCP connection at its port within ``JOIN_PROBE_S``
     (``auto`` and an address without a port are left to Ray): with nothing listening there, ``ray.init``
     retried without end, and a Ctrl-C then read as a sweep to resume."""
@@ -79,8 +102,8 @@ def _check_answers(address: str) -> None:
     except OSError as exc:
         reason = f"no answer in {JOIN_PROBE_S:g} s" if isinstance(exc, TimeoutError) else exc.strerror or exc
         raise PipelineError(
-            f"cannot join a Ray cluster at --ray-address {address!r}: nothing answers at {host}:{port} "
-            f"({reason}); is the cluster running (`ray status` on its head)? {_GIVE_ADDRESS}"
+            f"cannot join a Ray cluster at {given} {address!r}: nothing answers at {host}:{port} "
+            f"({reason}); is the cluster running (`ray status` on its head)? {_give_address(given)}"
         ) from None
 
 

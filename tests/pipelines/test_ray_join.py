@@ -135,3 +135,64 @@ def test_a_cluster_with_fewer_free_cpus_than_workers_runs_as_many_as_fit(capsys)
     assert "has 0 CPUs free for --workers 2: the sweep runs 1 worker; that one waits for a CPU" in (
         capsys.readouterr().err
     )
+
+
+def _backend_ray(monkeypatch) -> types.ModuleType:
+    """A stand-in ``ray`` for pipelines.experiments.backends' RayBackend: not started, recording ``init``'s
+    keywords, its actors running the driver's code."""
+    import sys
+
+    from pipelines.plugins import code_with_plugins
+
+    fake = _ray()
+    fake.is_initialized = lambda: False  # type: ignore[attr-defined]
+    actor = types.SimpleNamespace(code=types.SimpleNamespace(remote=lambda: "ref"))
+    fake.remote = lambda **_: lambda cls: types.SimpleNamespace(remote=lambda *a: actor)  # type: ignore[attr-defined]
+    fake.get = lambda ref: ("node", code_with_plugins())  # type: ignore[attr-defined]
+    fake.exceptions = types.SimpleNamespace(RayActorError=RuntimeError)  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "ray", fake)
+    return fake
+
+
+def test_a_sweep_under_ray_address_joins_that_cluster_as_ray_init_does(listening, monkeypatch, capsys):
+    """`ray job submit` runs its entrypoint under $RAY_ADDRESS, and a Ray user exports it to have every driver
+    join that cluster (ray.init with no address reads it): a sweep without --ray-address started a Ray of its
+    own beside the cluster instead ("Started a local Ray instance"), without a word. It joins now, saying so;
+    RAY_ADDRESS=local, or a dashboard's URL (Ray Jobs' CLI reads that one), keeps the sweep's own Ray."""
+    from pipelines.experiments.backends import RayBackend
+
+    fake = _backend_ray(monkeypatch)
+    monkeypatch.setenv("RAY_ADDRESS", listening)
+    RayBackend(2, "none", address=None)
+    assert [call["address"] for call in fake.calls] == [listening]  # type: ignore[attr-defined]
+    assert f"joining the Ray cluster at RAY_ADDRESS='{listening}'" in capsys.readouterr().err
+    port = _closed_port()
+    monkeypatch.setenv("RAY_ADDRESS", f"127.0.0.1:{port}")
+    with pytest.raises(PipelineError) as refused:
+        RayBackend(2, "none", address=None)
+    assert str(refused.value).startswith(
+        f"cannot join a Ray cluster at RAY_ADDRESS '127.0.0.1:{port}': nothing"
+    )
+    assert str(refused.value).endswith("or set RAY_ADDRESS=local for a local Ray")
+    for own in ("local", "", "http://127.0.0.1:8265"):
+        fake.calls.clear()  # type: ignore[attr-defined]
+        monkeypatch.setenv("RAY_ADDRESS", own)
+        RayBackend(2, "none", address=None)
+        assert [call["address"] for call in fake.calls] == ["local"]  # type: ignore[attr-defined]
+    # --ray-address is the one joined, beside the variable
+    fake.calls.clear()  # type: ignore[attr-defined]
+    RayBackend(2, "none", address=listening)
+    assert [call["address"] for call in fake.calls] == [listening]  # type: ignore[attr-defined]
+
+
+def test_ray_address_lets_a_sweep_take_more_workers_than_this_machine(monkeypatch):
+    """--workers beyond this machine's cores is refused for a local pool, not for a cluster: $RAY_ADDRESS
+    names one as --ray-address does (for Ray's backend; a process pool does not read it)."""
+    from pipelines.config.settings import SweepSettings, local_workers_limit
+
+    many = local_workers_limit() + 1
+    monkeypatch.setenv("RAY_ADDRESS", "head:6379")
+    assert SweepSettings(workers=many, backend="ray").beyond_this_machine() is None
+    assert SweepSettings(workers=many, backend="process").beyond_this_machine() is not None
+    monkeypatch.setenv("RAY_ADDRESS", "local")
+    assert SweepSettings(workers=many, backend="ray").beyond_this_machine() is not None
