@@ -22,6 +22,7 @@ import os
 import signal
 import sys
 import threading
+import time
 import warnings
 from collections.abc import Iterable, Iterator
 from typing import Any, Final, Protocol
@@ -41,6 +42,12 @@ from predictors.plugin_import import search_listed_folders
 
 BACKENDS: Final[tuple[str, ...]] = ("auto", "ray", "process", "inline")
 RAY_MISSING: Final[str] = "the Ray backend needs the cluster extra: pip install -e '.[cluster]'"
+# Ray's driver ends its own process (exit 1, one C++ log line, no report) when its cluster's GCS has not
+# answered for 60 s (Ray 2.60's gcs_rpc_server_reconnect_timeout_s): `ray stop` on the head, the head lost.
+# While no episode comes back, the GCS's port is tried every GCS_PROBE_S; unanswered for GCS_GONE_S, the
+# sweep stops itself first, with its report.
+GCS_PROBE_S: Final[float] = 5.0
+GCS_GONE_S: Final[float] = 20.0
 
 
 class Backend(Protocol):
@@ -165,10 +172,12 @@ class RayBackend:
             finally:
                 if terminate is not None and threading.current_thread() is threading.main_thread():
                     signal.signal(signal.SIGTERM, terminate)
+        self._gcs = _gcs_endpoint(ray, address)
         self._actor_class: Any = ray.remote(num_cpus=1)(_RayEpisodeWorker)
         self._actor_args = (record, jit, scratch_root, timeout_s)
         self._actors: list[Any] = [self._actor_class.remote(*self._actor_args) for _ in range(workers)]
         self._uncommitted_nodes: set[str] = set()  # compared without a commit: said once a node
+        self._gcs_gone = False
         self._drained = False
         try:
             self._check_code(self._actors)
@@ -187,7 +196,8 @@ class RayBackend:
         driver = code_with_plugins()
         for ref in [actor.code.remote() for actor in actors]:
             try:
-                node, code = self._ray.get(ref)
+                # a replacement's start waits on the GCS: tried as episodes' waits are (_next_done)
+                node, code = self._ray.get(ref if self._gcs is None else self._next_done([ref]))
             except self._ray.exceptions.RayActorError:
                 continue
             if isinstance(code, str):  # a plugin that does not load there
@@ -227,7 +237,7 @@ class RayBackend:
             submit(slot, 2)
         deaths = 0  # actor deaths since an episode last came back
         while owner:
-            (ref,), _ = ray.wait(list(owner), num_returns=1)
+            ref = self._next_done(list(owner))
             slot, actor, task = owner.pop(ref)
             try:
                 outcome = ray.get(ref)
@@ -250,7 +260,33 @@ class RayBackend:
             yield outcome
         self._drained = True  # every episode came back: close may let the actors close their controllers
 
+    def _next_done(self, refs: list[Any]) -> Any:
+        """The first of ``refs`` to come back; SweepStopped once the cluster's GCS has not answered for
+        ``GCS_GONE_S`` while none did (Ray would end the driver's process at 60 s: see GCS_PROBE_S)."""
+        if self._gcs is None:  # nothing to try: wait as Ray does
+            return self._ray.wait(refs, num_returns=1)[0][0]
+        silent_since: float | None = None
+        while True:
+            done, _ = self._ray.wait(refs, num_returns=1, timeout=GCS_PROBE_S)
+            if done:
+                return done[0]
+            if _answers(self._gcs):
+                silent_since = None
+                continue
+            now = time.monotonic()
+            silent_since = now if silent_since is None else silent_since
+            if now - silent_since >= GCS_GONE_S:
+                self._gcs_gone = True  # close() then leaves Ray alone: its calls wait on the GCS
+                host, port = self._gcs
+                raise SweepStopped(
+                    f"the Ray cluster stopped answering (its GCS at {host}:{port}, for {GCS_GONE_S:g} s: "
+                    "`ray stop`, or its head lost); the episodes recorded stay, and the same command "
+                    "runs the rest once the cluster is back"
+                )
+
     def close(self) -> None:
+        if self._gcs_gone:  # Ray's kill and shutdown wait on the lost GCS until Ray ends the process
+            return
         try:
             if self._drained:
                 with contextlib.suppress(Exception):  # a hung or dead actor: killed below all the same
@@ -260,6 +296,34 @@ class RayBackend:
                 self._ray.kill(actor)
         if self._owns_ray:
             self._ray.shutdown()
+
+
+def _gcs_endpoint(ray: Any, address: str | None) -> tuple[str, int] | None:
+    """The (host, port) whose answer says the cluster is there: Ray Client's server for a ray:// address
+    (the driver reaches no other port of the cluster), else the GCS the driver is connected to; None where
+    Ray does not say (a stand-in ray, another Ray version)."""
+    from urllib.parse import urlsplit
+
+    try:
+        if address is not None and address.lower().startswith("ray://"):
+            parts = urlsplit(address)
+            host, port = parts.hostname, parts.port
+        else:
+            host, _, number = str(ray.get_runtime_context().gcs_address).rpartition(":")
+            port = int(number)
+    except (AttributeError, ValueError, TypeError):
+        return None
+    return (host, port) if host and port else None
+
+
+def _answers(endpoint: tuple[str, int]) -> bool:
+    import socket
+
+    try:
+        socket.create_connection(endpoint, timeout=GCS_PROBE_S).close()
+    except OSError:
+        return False
+    return True
 
 
 def _comparable(

@@ -1311,6 +1311,7 @@ def test_the_ray_backend_starts_ray_with_that_environment(monkeypatch):
     actor = types.SimpleNamespace(code=types.SimpleNamespace(remote=lambda: "ref"))
     fake.remote = lambda **_: lambda cls: types.SimpleNamespace(remote=lambda *a: actor)  # type: ignore[attr-defined]
     fake.get = lambda ref: ("node", code_with_plugins())  # type: ignore[attr-defined]
+    fake.wait = lambda refs, num_returns, timeout=None: (refs[:1], refs[1:])  # type: ignore[attr-defined]
     fake.exceptions = types.SimpleNamespace(RayActorError=RuntimeError)  # type: ignore[attr-defined]
     fake.available_resources = lambda: {"CPU": 2.0}  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "ray", fake)
@@ -1526,3 +1527,59 @@ def test_the_help_names_the_experiments_that_refuse_margins_and_conventions(caps
     fixed = {name for name, e in EXPERIMENTS.items() if refuses(lambda e=e: e.with_world(World("v1")))}
     assert set(re.split(r", | and ", said.group(1))) == no_margins
     assert {said.group(2)} == fixed
+
+
+@pytest.mark.parametrize("lost_first", [True, False], ids=["actor-lost-too", "cluster-alone"])
+def test_a_ray_cluster_that_stops_answering_stops_the_sweep_in_one_line(lost_first, monkeypatch):
+    """`ray stop` on the cluster's head mid-sweep: Ray's driver waited on the lost GCS (for a replacement
+    actor's code check, or for episodes), then ended the process after 60 s (exit 1, a C++ log line, no
+    report). The backend now tries the GCS's port while nothing comes back and stops the sweep itself
+    (SweepStopped: the command reports what was recorded) once it has not answered for GCS_GONE_S."""
+    import socket
+    import types
+
+    from pipelines.errors import SweepStopped
+    from pipelines.experiments import backends
+    from pipelines.plugins import code_with_plugins
+
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        port = server.getsockname()[1]  # closed below: nothing answers there, as after `ray stop`
+    monkeypatch.setattr(backends, "GCS_PROBE_S", 0.01, raising=False)
+    monkeypatch.setattr(backends, "GCS_GONE_S", 0.05, raising=False)
+    dead: set[int] = set()  # the actors lost (lost_first: the first, with its episode)
+    actors: list[types.SimpleNamespace] = []
+
+    def actor(*_):
+        n = len(actors)
+        actors.append(types.SimpleNamespace(
+            code=types.SimpleNamespace(remote=lambda: ("code", n)),
+            run=types.SimpleNamespace(remote=lambda task: ("run", n)),
+        ))  # fmt: skip
+        return actors[-1]
+
+    def wait(refs, num_returns, timeout=None):
+        assert timeout is not None, "a wait on a lost GCS never ends"
+        done = [r for r in refs if r[1] == 0 and (r[0] == "code" or (lost_first and not dead))]
+        return done[:1], [r for r in refs if r not in done[:1]]
+
+    def get(ref):
+        if ref[0] == "code":
+            return "node", code_with_plugins()
+        dead.add(ref[1])
+        raise _FakeActorDied("The actor died unexpectedly before finishing this task.")
+
+    fake = types.ModuleType("ray")
+    fake.is_initialized = lambda: True  # type: ignore[attr-defined]
+    fake.remote = lambda **_: lambda cls: types.SimpleNamespace(remote=actor)  # type: ignore[attr-defined]
+    fake.wait, fake.get = wait, get  # type: ignore[attr-defined]
+    fake.exceptions = types.SimpleNamespace(RayActorError=_FakeActorDied)  # type: ignore[attr-defined]
+    gcs = types.SimpleNamespace(gcs_address=f"127.0.0.1:{port}")
+    fake.get_runtime_context = lambda: gcs  # type: ignore[attr-defined]
+    fake.kill = lambda a: pytest.fail("Ray's kill waits on the lost GCS")  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "ray", fake)
+    backend = backends.RayBackend(1, "none", address=None)
+    tasks = [types.SimpleNamespace(key=k) for k in "ab"]
+    with pytest.raises(SweepStopped, match=r"^the Ray cluster stopped answering \(its GCS at 127\.0\.0\.1"):
+        list(backend.run(tasks))
+    backend.close()
+    assert len(actors) == (2 if lost_first else 1)
