@@ -56,9 +56,10 @@ def join_cluster(ray: Any, address: str, env: dict[str, Any], given: str = "--ra
     try:
         ray.init(address=address, runtime_env=env, log_to_driver=False)
     except refused as exc:
+        # refused for its token: the address is right, and the hint is the whole answer
+        tail = "" if _refused_token(exc) else f"; {_give_address(given)}"
         raise PipelineError(
-            f"cannot join a Ray cluster at {given} {address!r} ({_first_line(exc)}){_auth_hint(exc)}; "
-            f"{_give_address(given)}"
+            f"cannot join a Ray cluster at {given} {address!r} ({_first_line(exc)}){_auth_hint(exc)}{tail}"
         ) from None
     finally:
         waiting.cancel()
@@ -121,15 +122,39 @@ def _first_line(exc: BaseException) -> str:
 
 
 def _auth_hint(exc: BaseException) -> str:
-    """A cluster started with token authentication refuses a driver without it by a ConnectionError that
-    names no authentication (Ray 2.60: "Failed to connect to Ray cluster at ...", the reason only in a log
-    line above it)."""
+    """A cluster started with token authentication refuses a driver without it by a ConnectionError whose
+    message names no authentication (Ray 2.60: "Failed to connect to Ray cluster at ..."); the error it was
+    raised from does ("InvalidAuthToken"), where Ray says so: then the hint says it for sure, a wrong token
+    of a driver in token mode too (which had no hint at all). Where it does not, a hint that it may be so."""
+    token = "the cluster's token (~/.ray/auth_token, $RAY_AUTH_TOKEN or $RAY_AUTH_TOKEN_PATH)"
+    in_token_mode = os.environ.get("RAY_AUTH_MODE", "").lower() == "token"
+    if _refused_token(exc):
+        if in_token_mode:
+            return (
+                f"; the cluster refused this driver's authentication token (InvalidAuthToken): give {token}"
+            )
+        return (
+            "; the cluster wants an authentication token (InvalidAuthToken): set RAY_AUTH_MODE=token where "
+            f"the sweep runs, with {token}"
+        )
     if isinstance(exc, ConnectionError) and not os.environ.get("RAY_AUTH_MODE"):
         return (
             "; a cluster started with token authentication refuses so too: then set RAY_AUTH_MODE=token "
             "where the sweep runs, with the cluster's token (~/.ray/auth_token or $RAY_AUTH_TOKEN)"
         )
     return ""
+
+
+def _refused_token(exc: BaseException) -> bool:
+    """Whether ``exc`` or an error it was raised from names Ray's refusal of the driver's token."""
+    seen: BaseException | None = exc
+    for _ in range(8):  # a chain of causes is short; a cycle would loop for ever
+        if seen is None:
+            return False
+        if "InvalidAuthToken" in str(seen):
+            return True
+        seen = seen.__cause__ or seen.__context__
+    return False
 
 
 def workers_that_fit(ray: Any, address: str, workers: int) -> int:

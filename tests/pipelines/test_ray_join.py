@@ -196,3 +196,36 @@ def test_ray_address_lets_a_sweep_take_more_workers_than_this_machine(monkeypatc
     assert SweepSettings(workers=many, backend="process").beyond_this_machine() is not None
     monkeypatch.setenv("RAY_ADDRESS", "local")
     assert SweepSettings(workers=many, backend="ray").beyond_this_machine() is not None
+
+
+@pytest.mark.parametrize("mode", [None, "token"])
+def test_a_join_refused_for_its_token_says_so_for_sure(listening, monkeypatch, mode):
+    """Ray 2.60 refused a driver without the cluster's token, or with a wrong one, by ConnectionError("Failed
+    to connect to Ray cluster at ...") raised from a RuntimeError whose text names InvalidAuthToken (met with
+    the real Ray: `RAY_AUTH_MODE=token RAY_AUTH_TOKEN=<wrong> crowdmpc sweep --ray-address HOST:6391 ...`
+    said only "Failed to connect", nothing about the token). The hint now says which it is."""
+
+    def init(**_):
+        try:
+            raise RuntimeError(
+                "Failed to connect to GCS. Last connection error: ... RPC error: InvalidAuthToken: "
+                "Authentication token is missing or incorrect."
+            )
+        except RuntimeError as cause:
+            raise ConnectionError("Failed to connect to Ray cluster at 192.0.2.2:6391") from cause
+
+    if mode is None:
+        monkeypatch.delenv("RAY_AUTH_MODE", raising=False)
+    else:
+        monkeypatch.setenv("RAY_AUTH_MODE", mode)
+    with pytest.raises(PipelineError) as refused:
+        join_cluster(_ray(init), listening, {})
+    said = str(refused.value)
+    assert "\n" not in said and "(Failed to connect to Ray cluster at 192.0.2.2:6391)" in said
+    assert "give the address" not in said  # the address is right
+    if mode is None:
+        assert (
+            "; the cluster wants an authentication token (InvalidAuthToken): set RAY_AUTH_MODE=token" in said
+        )
+    else:
+        assert "; the cluster refused this driver's authentication token (InvalidAuthToken): give " in said
