@@ -97,9 +97,10 @@ def _write_atomic(path: Path, data: bytes) -> None:
         ) from None
 
 
-def _sweep_meta(out: Path, config: SweepConfig, tasks: list[EpisodeTask]) -> dict[str, Any]:
+def _sweep_meta(out: Path, config: SweepConfig, tasks: list[EpisodeTask], blocks: Checked) -> dict[str, Any]:
     """sweep.json's document (empty for a new sweep), with --reuse's run lines (``seed_from``, which writes
-    them and their records); PipelineError when it holds another experiment (a directory belongs to one)."""
+    them and their records, checked against ``blocks``, the calibration blocks the workers are handed);
+    PipelineError when it holds another experiment (a directory belongs to one)."""
     path = out / SWEEP_FILE
     meta: dict[str, Any] = read_sweep_file(path) if path.exists() else {}
     if meta and meta.get("experiment") != config.experiment.name:
@@ -107,11 +108,9 @@ def _sweep_meta(out: Path, config: SweepConfig, tasks: list[EpisodeTask]) -> dic
             f"{out} holds a sweep of experiment {meta.get('experiment')!r}, not {config.experiment.name!r}; "
             "choose another --out"
         )
-    return (
-        meta
-        if config.reuse is None
-        else seed_from(config.reuse, out, config.experiment, tasks, meta, config.progress)
-    )
+    if config.reuse is None:
+        return meta
+    return seed_from(config.reuse, out, config.experiment, tasks, meta, config.progress, blocks)
 
 
 def _add_run(
@@ -225,9 +224,10 @@ def run_sweep(
     if len(set(keys)) != len(keys):
         raise PipelineError("the sweep plans the same episode twice (repeated --humans?)")
     with sweep_lock(out, made):
-        meta = _sweep_meta(out, config, tasks)
-        log = episode_log(out)
+        # before --reuse's check: the records it takes are checked against the blocks the workers plan with
         weights, calibrations = checked_inputs(tasks, weights, calibrations)
+        meta = _sweep_meta(out, config, tasks, calibrations)
+        log = episode_log(out)
         recorded = read_recorded(
             out, tasks, config.progress, repair=True, records=records, calibrations=calibrations
         )

@@ -82,3 +82,30 @@ def test_a_resume_checks_the_records_against_the_margins_its_workers_plan_with(t
     for record in records:
         margins = record["config"]["margins"]
         assert margins["margins_m"] == list(checked.quantiles[: len(margins["margins_m"])])
+
+
+def test_reuse_checks_the_others_records_against_the_margins_its_workers_plan_with(tmp_path, monkeypatch):
+    """`sweep --reuse OTHER` checked OTHER's records against a read of calibrations.json of its own, after
+    the plan's checks: a calibrate run between the reads refused records of the margins the workers plan
+    with (or took records of others)."""
+    from pipelines.experiments import sweep
+
+    errors, _ = class_errors(4)
+    checked = constant_velocity_block(errors)
+    save_calibration(checked)
+    other, out = tmp_path / "other", tmp_path / "sweep"
+    assert main([*SWEEP, "--episodes-per-cell", "1", "--out", str(other)]) == 0
+    real, saved = sweep.seed_from, []
+
+    def recalibrating(*args, **kwargs):  # after the plan's checks, before --reuse's
+        saved.append(save_calibration(constant_velocity_block(2 * errors)))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(sweep, "seed_from", recalibrating)
+    assert main([*SWEEP, "--episodes-per-cell", "2", "--reuse", str(other), "--out", str(out)]) == 0
+    records = list(episode_log(out).load().values())
+    assert saved and len(records) == 8
+    assert sum(record["run"] == 1 for record in records) == 4  # OTHER's four, taken (its run, first)
+    for record in records:
+        margins = record["config"]["margins"]
+        assert margins["margins_m"] == list(checked.quantiles[: len(margins["margins_m"])])
