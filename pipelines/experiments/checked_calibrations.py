@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Iterable, Mapping
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.loop.margins_read import CheckedBlock
@@ -91,9 +91,18 @@ def controller_reads(task: EpisodeTask) -> ControllerReads | None:
     return ControllerReads(calibration=None if handed is None else handed.located())
 
 
+class CheckedInputs(NamedTuple):
+    """What a sweep's driver checked and hands its workers, which its resume and --reuse checks check the
+    records against (pipelines.experiments.resume_checks): read again there, a `zoo add --replace` or a
+    calibrate run in between had them refuse records of what the workers plan with, or pass others."""
+
+    weights: Mapping[str, str | None]  # the sha256 of each zoo predictor's weights, by name
+    calibrations: Checked  # each method's block, by label
+
+
 def checked_inputs(
     tasks: list[EpisodeTask], weights: Mapping[str, str | None] | None, calibrations: Checked | None
-) -> tuple[Mapping[str, str | None], Checked]:
+) -> CheckedInputs:
     """``run_sweep``'s ``weights`` and ``calibrations``, those not given read as the run starts: the
     manifests' weights (``zoo_weights``), and each method's block for them from one read of the
     calibrations (``zoo_calibrations``)."""
@@ -101,4 +110,5 @@ def checked_inputs(
     from pipelines.loop.margins_read import read_once
 
     weights = zoo_weights(tasks) if weights is None else weights
-    return weights, zoo_calibrations(tasks, weights, read_once()) if calibrations is None else calibrations
+    blocks = zoo_calibrations(tasks, weights, read_once()) if calibrations is None else calibrations
+    return CheckedInputs(weights, blocks)

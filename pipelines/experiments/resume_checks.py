@@ -21,7 +21,7 @@ from pipelines.plain_json import plain
 if TYPE_CHECKING:
     from types import EllipsisType
 
-    from pipelines.experiments.checked_calibrations import Checked
+    from pipelines.experiments.checked_calibrations import CheckedInputs
     from pipelines.loop.margins import InForce, Located, MarginSpec
     from pipelines.loop.margins_read import CheckedBlock
 
@@ -33,13 +33,13 @@ def read_recorded(
     *,
     repair: bool = False,
     records: Callable[[int, bytes, dict[str, Any]], None] | None = None,
-    calibrations: Checked | None = None,
+    checked: CheckedInputs | None = None,
 ) -> ResumeChecks:
     """Which of ``tasks`` the log of ``out`` holds, as a resume reads it (a record at a time, a bar when
     ``progress``) and checked (``ResumeChecks.check``): what a resume runs is the rest. ``repair``: cut a torn
     last line off the log (only the sweep holding its lock may); ``records``: called with each record as
-    ``EpisodeLog.scan`` gives it; ``calibrations``: ``ResumeChecks``'."""
-    recorded = ResumeChecks(out, tasks, calibrations=calibrations)
+    ``EpisodeLog.scan`` gives it; ``checked``: ``ResumeChecks``'."""
+    recorded = ResumeChecks(out, tasks, checked=checked)
     for offset, line, record in episode_log(out).scan_shown(progress, repair=repair):
         recorded.add(record)
         if records is not None:
@@ -62,14 +62,16 @@ class ResumeChecks:
         tasks: list[EpisodeTask],
         *,
         reused: bool = False,
-        calibrations: Checked | None = None,
+        checked: CheckedInputs | None = None,
     ):
         """``reused``: ``out`` is another sweep's folder whose records ``sweep --reuse`` would take
-        (pipelines.experiments.reuse), not the folder this sweep extends. ``calibrations``: the block of each
-        method as the sweep hands it to its workers (``run_sweep``'s), which a cell's records are checked
-        against (a method not there: its block looked up here)."""
+        (pipelines.experiments.reuse), not the folder this sweep extends. ``checked``: the sha256 of each zoo
+        predictor's weights and the block of each method as the sweep hands them to its workers
+        (``run_sweep``'s), which the records are checked against (a name or method not there: looked up
+        here; None: all looked up here)."""
         self.out = out
-        self._calibrations = calibrations or {}
+        self._weights = {} if checked is None else checked.weights
+        self._calibrations = {} if checked is None else checked.calibrations
         self.reused = reused
         self.tasks = tasks
         self._index = {t.key: i for i, t in enumerate(tasks)}
@@ -139,14 +141,15 @@ class ResumeChecks:
 
     def _check_predictors(self) -> None:
         """Refuse to extend a cell whose records came from other weights than the zoo holds now (a retrained
-        model): its table would silently mix two predictors."""
+        model): its table would silently mix two predictors. Now: the weights the sweep checked, which its
+        workers load (the manifest, read again, may name others a `zoo add --replace` put in since)."""
         from predictors.registry import checkpoint_sha256
 
         current: dict[str | None, str | None] = {}  # predictor name (None in a record without one) -> sha256
         log = self.out / EPISODES_FILE
         for i, name, sha256 in sorted(self._predictors.values(), key=lambda first: first[0]):
             if name not in current:
-                current[name] = checkpoint_sha256(name)
+                current[name] = self._weights[name] if name in self._weights else checkpoint_sha256(name)
             if sha256 != current[name]:
                 raise PipelineError(
                     f"{log} holds episodes of {self.tasks[i].cell.key} run with predictor {name!r} of "

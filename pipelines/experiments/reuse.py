@@ -46,7 +46,7 @@ from pipelines.experiments.run_lines import REUSED, is_reused, lost_runs, run_nu
 from pipelines.experiments.tasks import EpisodeTask
 
 if TYPE_CHECKING:
-    from pipelines.experiments.checked_calibrations import Checked
+    from pipelines.experiments.checked_calibrations import CheckedInputs
 
 
 def check_source(source: Path, out: Path) -> None:
@@ -108,7 +108,7 @@ def taken(
     *,
     repair: bool = False,
     progress: bool | None = False,
-    calibrations: Checked | None = None,
+    checked: CheckedInputs | None = None,
 ) -> Taken:
     """The episodes of ``tasks`` that ``source`` (another sweep's folder) recorded and ``out`` has not. Both
     folders' records are checked as a resume checks its own (the weights, margins and crowd the cells plan
@@ -116,14 +116,14 @@ def taken(
     and a run number an episode, not the records (those of a 20,000-episode source took 18 KB each).
     ``repair``: cut a torn last line off ``out``'s log (only the sweep holding its lock may), which the
     records taken would otherwise follow. ``progress``: a bar of each log read (None: on a terminal only), of
-    100,000 records ~10 s each. ``calibrations``: the block of each method the sweep hands its workers
+    100,000 records ~10 s each. ``checked``: the weights and calibration blocks the sweep hands its workers
     (``ResumeChecks``'), which both folders' records are checked against."""
     from pipelines.experiments.resume_checks import ResumeChecks, read_recorded
 
     check_source(source, out)
-    own = read_recorded(out, list(tasks), progress, repair=repair, calibrations=calibrations)
+    own = read_recorded(out, list(tasks), progress, repair=repair, checked=checked)
     left = {t.key for i, t in enumerate(tasks) if not own.recorded(i)}
-    checks = ResumeChecks(source, list(tasks), reused=True, calibrations=calibrations)
+    checks = ResumeChecks(source, list(tasks), reused=True, checked=checked)
     there: dict[str, Any] = {}
     for record in _source_records(source, progress):
         if record["key"] in left:  # a key once: the source's scan refuses a second
@@ -150,13 +150,13 @@ def seed_from(
     tasks: Sequence[EpisodeTask],
     meta: dict[str, Any],
     progress: bool | None = False,
-    calibrations: Checked | None = None,
+    checked: CheckedInputs | None = None,
 ) -> dict[str, Any]:
     """Give ``out`` (a sweep folder whose lock the caller holds; ``meta``: its sweep.json, checked to be
     ``experiment``'s) the episodes ``taken`` finds in ``source``: their runs' lines first, in sweep.json,
     then their records, relabelled, in episodes.jsonl. Returns sweep.json as written; says on stderr what it
-    took. ``progress``, ``calibrations``: ``taken``'s."""
-    found = taken(source, out, tasks, repair=True, progress=progress, calibrations=calibrations)
+    took. ``progress``, ``checked``: ``taken``'s."""
+    found = taken(source, out, tasks, repair=True, progress=progress, checked=checked)
     if not found.runs_there:
         print(f"--reuse {source}: none of its episodes is one of this plan's left to run", file=sys.stderr)
         return meta

@@ -97,10 +97,9 @@ def _write_atomic(path: Path, data: bytes) -> None:
         ) from None
 
 
-def _sweep_meta(out: Path, config: SweepConfig, tasks: list[EpisodeTask], blocks: Checked) -> dict[str, Any]:
-    """sweep.json's document (empty for a new sweep), with --reuse's run lines (``seed_from``, which writes
-    them and their records, checked against ``blocks``, the calibration blocks the workers are handed);
-    PipelineError when it holds another experiment (a directory belongs to one)."""
+def _sweep_meta(out: Path, config: SweepConfig) -> dict[str, Any]:
+    """sweep.json's document (empty for a new sweep); PipelineError when it holds another experiment (a
+    directory belongs to one)."""
     path = out / SWEEP_FILE
     meta: dict[str, Any] = read_sweep_file(path) if path.exists() else {}
     if meta and meta.get("experiment") != config.experiment.name:
@@ -108,9 +107,7 @@ def _sweep_meta(out: Path, config: SweepConfig, tasks: list[EpisodeTask], blocks
             f"{out} holds a sweep of experiment {meta.get('experiment')!r}, not {config.experiment.name!r}; "
             "choose another --out"
         )
-    if config.reuse is None:
-        return meta
-    return seed_from(config.reuse, out, config.experiment, tasks, meta, config.progress, blocks)
+    return meta
 
 
 def _add_run(
@@ -224,13 +221,12 @@ def run_sweep(
     if len(set(keys)) != len(keys):
         raise PipelineError("the sweep plans the same episode twice (repeated --humans?)")
     with sweep_lock(out, made):
-        # before --reuse's check: the records it takes are checked against the blocks the workers plan with
-        weights, calibrations = checked_inputs(tasks, weights, calibrations)
-        meta = _sweep_meta(out, config, tasks, calibrations)
+        meta = _sweep_meta(out, config)
+        checked = checked_inputs(tasks, weights, calibrations)
+        if config.reuse is not None:  # its run lines and records, checked against what the workers are handed
+            meta = seed_from(config.reuse, out, config.experiment, tasks, meta, config.progress, checked)
         log = episode_log(out)
-        recorded = read_recorded(
-            out, tasks, config.progress, repair=True, records=records, calibrations=calibrations
-        )
+        recorded = read_recorded(out, tasks, config.progress, repair=True, records=records, checked=checked)
         note = recorded.outside_note()
         if note is not None:
             print(note, file=sys.stderr)
@@ -248,7 +244,7 @@ def run_sweep(
         if not todo:
             add_run()
             return outcome
-        todo = with_checked_calibrations(with_checked_weights(todo, weights), calibrations)
+        todo = with_checked_calibrations(with_checked_weights(todo, checked.weights), checked.calibrations)
         scratch = make_scratch_root()
         try:
             with terminate_as_interrupt():

@@ -435,3 +435,35 @@ def test_a_resume_checks_every_cells_margins_against_one_read_of_the_calibration
     checks.check()
     assert len(tasks) == 4
     assert opened[zoo.checkpoints_dir().resolve() / "calibrations.json"] == 1
+
+
+def test_a_resume_and_a_reuse_read_the_manifest_and_calibrations_once(tmp_path, monkeypatch):
+    """A resume's check read the manifest again for the weights' sha256, and --reuse's checks the manifest
+    (once a folder and once a cell) and calibrations.json again, after the plan's checks had read both:
+    with nothing left to run, a resume read the manifest twice, and a --reuse that took every episode five
+    times and calibrations.json twice. They now check the records against what the plan's checks read."""
+    from pipelines.cli import main
+    from predictors import zoo
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    shipped = zoo.checkpoints_dir().resolve()
+    plan = ["sweep", "--experiment", "controllers", "--controllers", "cmpc,dmpc", "--humans", "2"]
+    plan += ["--predictor", "social_lstm_eth", "--margins", "conformal:0.1", "--robots", "1", "--backend"]
+    plan += [
+        "inline",
+        "--no-progress",
+        "--jit",
+        "off",
+        "--set",
+        "env.time_limit=2",
+        "--episodes-per-cell",
+        "1",
+    ]
+    other = tmp_path / "other"
+    assert main([*plan, "--out", str(other)]) == 0
+    opened = count_opens(monkeypatch, "manifest.json", "calibrations.json")
+    assert main([*plan, "--out", str(other)]) == 0  # every episode recorded: no worker loads the model
+    assert opened == {shipped / "manifest.json": 1, shipped / "calibrations.json": 1}
+    opened.clear()
+    assert main([*plan, "--reuse", str(other), "--out", str(tmp_path / "sweep")]) == 0  # takes them all
+    assert opened == {shipped / "manifest.json": 1, shipped / "calibrations.json": 1}

@@ -307,3 +307,40 @@ def test_a_sweep_stops_at_weights_replaced_mid_way_and_a_rerun_with_the_checked_
     held = (out / "episodes.jsonl").read_text()
     assert held.startswith(first) and len(held.splitlines()) == 8
     assert {json.loads(line)["predictor_sha256"] for line in held.splitlines()} == {checked}
+
+
+def test_a_resume_checks_the_records_against_the_weights_its_driver_checked(tmp_path, monkeypatch):
+    """The resume check read the zoo's manifest again for the weights' sha256, after the plan's checks had
+    loaded them (the sha256 the workers are handed, pipelines.experiments.checked_weights): a manifest that
+    named other weights between the reads (a `zoo add --replace`, put back) refused the records of the very
+    weights the workers load."""
+    import json
+    import shutil
+
+    from pipelines.experiments import sweep
+    from pipelines.experiments.log import episode_log
+    from predictors import zoo
+    from tests.pipelines.test_checked_calibrations import SWEEP
+
+    shipped = tmp_path / "checkpoints"
+    shutil.copytree(zoo.shipped_checkpoints_dir(), shipped)
+    monkeypatch.setenv(zoo.CHECKPOINTS_ENV, str(shipped))
+    manifest, name = shipped / "manifest.json", "social_lstm_eth"
+    plan = [{"constant_velocity": name, "1,2": "2"}.get(word, word) for word in SWEEP]  # 2 cells
+    out = tmp_path / "sweep"
+    assert main([*plan, "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    checked, real = manifest.read_bytes(), sweep.read_recorded
+    other = json.loads(checked)
+    next(entry for entry in other["models"] if entry["name"] == name)["sha256"] = "ee" * 32
+
+    def replaced_meanwhile(*args, **kwargs):  # after the plan's checks, put back before any worker loads
+        manifest.write_text(json.dumps(other))
+        try:
+            return real(*args, **kwargs)
+        finally:
+            manifest.write_bytes(checked)
+
+    monkeypatch.setattr(sweep, "read_recorded", replaced_meanwhile)
+    assert main([*plan, "--episodes-per-cell", "2", "--out", str(out)]) == 0
+    records = list(episode_log(out).load().values())
+    assert len(records) == 4 and {r["predictor_sha256"] for r in records} == {zoo.locate(name).entry.sha256}
