@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
         check_first_episodes(tasks)
         from pipelines.commands.sweep_dry_run import print_plan
 
-        print_plan(config, cells, tasks, args.reuse)
+        print_plan(config, cells, tasks, args.reuse, models)
         return 0
 
     status = 0

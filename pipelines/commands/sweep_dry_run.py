@@ -9,15 +9,22 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from pipelines.commands.sweep_predictors import PlanModels
     from pipelines.experiments.sweep_config import SweepConfig
     from pipelines.experiments.tasks import Cell, EpisodeTask
 
 
 def print_plan(
-    config: SweepConfig, cells: Sequence[Cell], tasks: list[EpisodeTask], reuse: Path | None
+    config: SweepConfig,
+    cells: Sequence[Cell],
+    tasks: list[EpisodeTask],
+    reuse: Path | None,
+    models: PlanModels | None = None,
 ) -> None:
     """The cells of the plan, a line each; a folder's log read as the resume reads it
-    (``read_recorded``, which refuses what the resume would), and the episodes ``--reuse`` would take."""
+    (``read_recorded``, which refuses what the resume would), and the episodes ``--reuse`` would take.
+    ``models``: the plan's checks' reads, whose weights and calibration blocks the records are checked
+    against, as the run checks them (None: read again)."""
     from pipelines.experiments.log import EPISODES_FILE
     from pipelines.experiments.resume_checks import read_recorded
     from predictors.text_table import counted
@@ -25,15 +32,16 @@ def print_plan(
     out, experiment = Path(config.out), config.experiment
     print(f"{experiment.title}: {len(cells)} cells x {config.episodes_per_cell} episodes = {len(tasks)}")
     log = out / EPISODES_FILE
+    checked = None if models is None else models.checked()
     done: Counter[str] | None = None  # recorded episodes by cell key; None: no log, no column
     if log.is_file():
-        recorded = read_recorded(out, tasks, config.progress)
+        recorded = read_recorded(out, tasks, config.progress, checked=checked)
         done = Counter(task.cell.key for i, task in enumerate(tasks) if recorded.recorded(i))
     taken = 0
     if reuse is not None:
         from pipelines.experiments.reuse import taken as reused
 
-        taken = len(reused(reuse, out, tasks, progress=config.progress).runs_there)
+        taken = len(reused(reuse, out, tasks, progress=config.progress, checked=checked).runs_there)
     width = max(22, *(len(cell.method) for cell in cells))  # --vary's labels are longer
     digits = len(str(config.episodes_per_cell))
     crowds = {cell.key: counted(cell.n_humans, "human") for cell in cells}

@@ -12,7 +12,7 @@ if TYPE_CHECKING:
     from collections.abc import Mapping
 
     from pipelines.experiments.cells import Experiment
-    from pipelines.experiments.checked_calibrations import Checked
+    from pipelines.experiments.checked_calibrations import Checked, CheckedInputs
     from pipelines.loop.margins_read import Planned
     from predictors.base import Predictor
     from predictors.errors import PredictorError
@@ -45,6 +45,13 @@ class PlanModels(NamedTuple):
         from pipelines.experiments.checked_calibrations import checked_blocks
 
         return None if self.blocks is None else checked_blocks(self.blocks)
+
+    def checked(self) -> CheckedInputs:
+        """``weights`` and ``calibrations`` (a method not there: looked up by whoever takes them), which a
+        dry run checks the records of a resume and of --reuse against, as the run does."""
+        from pipelines.experiments.checked_calibrations import CheckedInputs
+
+        return CheckedInputs(self.weights(), self.calibrations() or {})
 
 
 def check_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None = None) -> PlanModels:

@@ -467,3 +467,34 @@ def test_a_resume_and_a_reuse_read_the_manifest_and_calibrations_once(tmp_path, 
     opened.clear()
     assert main([*plan, "--reuse", str(other), "--out", str(tmp_path / "sweep")]) == 0  # takes them all
     assert opened == {shipped / "manifest.json": 1, shipped / "calibrations.json": 1}
+
+
+def test_a_dry_runs_preview_of_a_resume_and_a_reuse_reads_the_manifest_and_calibrations_once(
+    tmp_path, monkeypatch, capsys
+):
+    """`sweep --dry-run` over a folder (and with --reuse) checks the records as the run would, but against
+    reads of the manifest and calibrations.json of its own, after the plan's checks had read both: here the
+    preview read the manifest 4 times and calibrations.json twice, with --reuse 10 and 4 times, and a `zoo
+    add --replace` or calibrate run between the reads had it refuse records the run would take, or pass
+    records the run refuses."""
+    from pipelines.cli import main
+    from predictors import zoo
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    shipped = zoo.checkpoints_dir().resolve()
+    plan = ["sweep", "--experiment", "controllers", "--controllers", "cmpc,dmpc", "--humans", "2"]
+    plan += ["--predictor", "social_lstm_eth", "--margins", "conformal:0.1", "--robots", "1", "--backend"]
+    plan += ["inline", "--no-progress", "--jit", "off", "--set", "env.time_limit=2"]
+    other, out = tmp_path / "other", tmp_path / "sweep"
+    assert main([*plan, "--episodes-per-cell", "2", "--out", str(other)]) == 0
+    assert main([*plan, "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    capsys.readouterr()
+    opened = count_opens(monkeypatch, "manifest.json", "calibrations.json")
+    assert main([*plan, "--episodes-per-cell", "2", "--dry-run", "--out", str(out)]) == 0
+    assert "2 of 4 planned episodes recorded" in capsys.readouterr().out
+    assert opened == {shipped / "manifest.json": 1, shipped / "calibrations.json": 1}, opened
+    opened.clear()
+    reuse = ["--episodes-per-cell", "2", "--dry-run", "--reuse", str(other), "--out", str(out)]
+    assert main([*plan, *reuse]) == 0
+    assert "takes 2 with --reuse" in capsys.readouterr().out  # OTHER's second of each cell
+    assert opened == {shipped / "manifest.json": 1, shipped / "calibrations.json": 1}, opened
