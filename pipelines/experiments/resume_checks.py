@@ -169,13 +169,14 @@ class ResumeChecks:
         log = self.out / EPISODES_FILE
         for i, stored, made in sorted(self._margins.values(), key=lambda first: first[0]):
             key = self.tasks[i].cell.key
+            cell = self.tasks[i].cell
+            handed = self._calibrations.get(cell.method, ...)
             if key not in current:
-                cell = self.tasks[i].cell
-                current[key] = planned_margins(cell, in_force, self._calibrations.get(cell.method, ...))
+                current[key] = planned_margins(cell, in_force, handed)
             if stored != current[key]:
                 raise PipelineError(
                     f"{log} holds episodes of {key} planned with {_margins_change(stored, current[key])}: "
-                    f"{_why_changed(self.tasks[i].cell, made)}; {self._remedy('the new margins')}"
+                    f"{_why_changed(cell, made, handed)}; {self._remedy('the new margins')}"
                 )
 
     def _check_crowds(self) -> None:
@@ -208,16 +209,21 @@ class ResumeChecks:
         )
 
 
-def _why_changed(cell: Cell, made: Any) -> str:
+def _why_changed(cell: Cell, made: Any, handed: CheckedBlock | None | EllipsisType = ...) -> str:
     """Why ``cell``'s margins moved since its record of calibration ``made`` (None: a record that names none):
     the block it planned with was made again, both named (constant_velocity's closed-loop blocks at 89af3ce,
-    m_1 moved by up to 1.5e-3 m), else a guess; a refusal had said "(recalibrated?)" of them too."""
+    m_1 moved by up to 1.5e-3 m), else a guess; a refusal had said "(recalibrated?)" of them too.
+    ``handed``: the block the cell's workers plan with, whose margins the refusal gives (``...``: looked up
+    here; read again, a calibrate run since the plan's checks had the refusal date another block)."""
     from pipelines.loop.margins import calibration_text
     from predictors.registry import checkpoint_sha256
 
     spec = cell.spec.behind(cell.world.sensor_range, cell.world.sensor_tracks)  # as planned_margins'
     try:
-        now = spec.margins.calibration(spec.predictor_name, checkpoint_sha256(spec.predictor_name))
+        if handed is ...:
+            now = spec.margins.calibration(spec.predictor_name, checkpoint_sha256(spec.predictor_name))
+        else:
+            now = None if handed is None else spec.margins.calibration(None, None, handed.located())
     except Exception:  # no block now (planned_margins found one a moment ago): said as before
         now = None
     fields = ("created", "data_sha256")

@@ -109,3 +109,35 @@ def test_reuse_checks_the_others_records_against_the_margins_its_workers_plan_wi
     for record in records:
         margins = record["config"]["margins"]
         assert margins["margins_m"] == list(checked.quantiles[: len(margins["margins_m"])])
+
+
+def test_a_resumes_refusal_names_the_block_its_workers_plan_with(tmp_path, monkeypatch, capsys):
+    """A refused resume said the cell's margins now (the block its workers are handed) but named as "now"
+    the block calibrations.json held when the refusal was made, read once more: a calibrate run between the
+    plan's checks and the refusal had it give one block's margins and another's date."""
+    import dataclasses
+
+    from pipelines.experiments import sweep
+
+    errors, _ = class_errors(4)
+    made = dataclasses.replace(constant_velocity_block(errors), created="2026-01-01T10:00:00+00:00")
+    save_calibration(made)
+    out = tmp_path / "sweep"
+    assert main([*SWEEP, "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    checked = dataclasses.replace(constant_velocity_block(2 * errors), created="2026-01-02T10:00:00+00:00")
+    save_calibration(checked)  # recalibrated after the records: the resume is refused
+    real = sweep.read_recorded
+
+    def recalibrating(*args, **kwargs):  # after the plan's checks, before the resume's
+        save_calibration(dataclasses.replace(checked, created="2026-01-03T10:00:00+00:00"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(sweep, "read_recorded", recalibrating)
+    capsys.readouterr()
+    assert main([*SWEEP, "--episodes-per-cell", "2", "--out", str(out)]) == 2
+    error = capsys.readouterr().err
+    assert "but the cell's margins are now [1.12, 2.24, 3.36, 4.48] m" in error
+    assert (
+        "(records: your calibration of 2026-01-01 10:00 UTC, now: your calibration of 2026-01-02 10:00 UTC)"
+        in error
+    )
