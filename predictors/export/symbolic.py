@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 import torch
 
-from predictors.export.errors import ExportError, current_module
+from predictors.export.errors import ExportError, current_module, unsupported
 
 # torch function -> handler(*args, **kwargs); filled by predictors.export.ops (import order: ops imports us).
 HANDLERS: dict[Any, Callable[..., Any]] = {}
@@ -76,7 +76,7 @@ class SymTensor:
     def __torch_function__(cls, func, types, args=(), kwargs=None):
         handler = HANDLERS.get(func)
         if handler is None:
-            raise ExportError(f"unsupported operation {op_name(func)}", current_module())
+            raise unsupported(f"operation {op_name(func)}")
         return handler(*args, **(kwargs or {}))
 
     # --------------------------------------------------------------------------------- shape queries
@@ -182,7 +182,7 @@ class SymTensor:
             raise AttributeError(name)
         method = METHODS.get(name)
         if method is None:
-            raise ExportError(f"unsupported tensor method .{name}()", current_module())
+            raise unsupported(f"tensor method .{name}()")
         return lambda *args, **kwargs: method(self, *args, **kwargs)
 
     __hash__ = object.__hash__
@@ -207,6 +207,8 @@ def op_name(func: Any) -> str:
     for prefix, public in (("TensorBase.", "Tensor."), ("_VariableFunctionsClass.", ""), ("_nn.", "")):
         if qualname.startswith(prefix):
             qualname = public + qualname.removeprefix(prefix)
+    if module == "torch.functional":  # torch.norm, torch.split ...: the name the user wrote
+        module = "torch"
     return f"{module}.{qualname}" if not qualname.startswith(module) else qualname
 
 

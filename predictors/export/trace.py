@@ -20,7 +20,7 @@ import torch
 from torch import nn
 
 from predictors.export.elementwise import sigmoid
-from predictors.export.errors import MODULE_STACK, TRACING, ExportError, current_module
+from predictors.export.errors import LAYER_STACK, MODULE_STACK, TRACING, ExportError, current_module
 from predictors.export.linalg import linear
 from predictors.export.movement import squeeze, unsqueeze
 from predictors.export.ops import register
@@ -119,15 +119,20 @@ def symbolic_run(net: nn.Module) -> Iterator[None]:
 
     def enter(module, args):
         MODULE_STACK.append(names.get(id(module), type(module).__name__))
+        LAYER_STACK.append(type(module))
 
     def leave(module, args, output):
         if MODULE_STACK:
             MODULE_STACK.pop()
+        if LAYER_STACK:
+            LAYER_STACK.pop()
 
     pre = nn.modules.module.register_module_forward_pre_hook(enter)
     post = nn.modules.module.register_module_forward_hook(leave)
     MODULE_STACK.clear()
     MODULE_STACK.append(type(net).__name__)
+    LAYER_STACK.clear()
+    LAYER_STACK.append(type(net))
     TRACING.append(net)
     was_training = net.training
     net.eval()
@@ -138,6 +143,7 @@ def symbolic_run(net: nn.Module) -> Iterator[None]:
         pre.remove()
         post.remove()
         MODULE_STACK.clear()
+        LAYER_STACK.clear()
         TRACING.remove(net)
         for module in patched:
             del module.forward

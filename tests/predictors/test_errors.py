@@ -21,6 +21,7 @@ ERRORS = [
     UnknownModel("social_lsmt", ["social_lstm"]),
     UnknownModel("my_nets:Net", ["social_lstm"]),
     ExportError("unsupported operation torch.sort", "ranker"),
+    ExportError("unsupported operation torch.sort", "ranker", "the supported operations are listed in ..."),
     UnknownController("cmcp", ["cmpc", "dmpc"]),
     UnknownController("my_controller:GoStraight", ["cmpc"]),
     EpisodeFailed(12, "circle", PipelineError("controller 'go': act() raised ValueError: boom")),

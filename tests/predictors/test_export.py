@@ -402,6 +402,36 @@ def test_unsupported_operation_names_the_op_and_the_module():
     assert "\n" not in str(info.value)
 
 
+@pytest.mark.parametrize(
+    ("fn", "modules", "message"),
+    [
+        (
+            lambda m, x: m.attn(x, x, x)[0],
+            {"attn": nn.MultiheadAttention(4, 2, batch_first=True)},
+            r"unsupported (operation|tensor method) \S+, inside torch\.nn\.MultiheadAttention, a layer "
+            r"the export does not map \(in module 'attn'\)",
+        ),
+        (
+            lambda m, x: torch.cdist(x, x),
+            {},
+            r"unsupported operation torch\.cdist \(in module 'Wrap'\)",
+        ),
+        (lambda m, x: x.all(-1), {}, r"unsupported tensor method \.all\(\) \(in module 'Wrap'\)"),
+    ],
+    ids=["torch_nn_layer", "torch_functional", "tensor_method"],
+)
+def test_unsupported_operation_names_the_layer_the_user_wrote_and_where_the_supported_ones_are(
+    fn, modules, message
+):
+    """`crowdmpc export` of a user's net with nn.MultiheadAttention said "unsupported operation
+    torch.is_floating_point (in module 'attn')", a call the user never wrote, and torch.cdist was named
+    torch.functional.cdist; neither line said where the supported operations are listed."""
+    with pytest.raises(ExportError, match=message) as info:
+        export(fn, (1, 3, 4), **modules)
+    assert str(info.value).endswith("; the supported operations are listed in docs/extending.md, section 1")
+    assert "\n" not in str(info.value)
+
+
 def test_softmax_of_a_row_of_only_minus_inf_stays_nan_as_in_torch():
     """Only attention gives a fully masked row 0; a plain softmax of all -inf is NaN in torch, and so here."""
     mask = torch.tensor([[True, False], [False, False]])
