@@ -8,7 +8,7 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
-from predictors.export.elementwise import add
+from predictors.export.elementwise import add, clamp, div, mul
 from predictors.export.errors import ExportError, current_module
 from predictors.export.movement import normal_dim, permute, reshape, squeeze, transpose, unsqueeze
 from predictors.export.symbolic import (
@@ -54,6 +54,52 @@ def mean(x, dim=None, keepdim=False, *, dtype=None):
     count = math.prod(x.shape_[d] for d in _reduce_dims(x, dim))
     total = reduce_sum(x, dim, keepdim)
     return SymTensor(total.m / count, total.shape_)
+
+
+# The 2-norm's names in torch, each with the orders that are the 2-norm of the reduced entries (a matrix's
+# Frobenius norm too); other orders (1, inf, 'nuc', a matrix's spectral ord=2) are refused.
+TWO_NORM_ORDERS = (2, 2.0, "fro", None)
+
+
+def two_norm(x, dim=None, keepdim=False):
+    """sqrt of the sum of squares over ``dim``, with torch's gradient at 0: 0 (its subgradient), where
+    sqrt's would be inf and a pair's distance to itself (always 0) made every Jacobian NaN."""
+    squares = reduce_sum(mul(x, x), dim, keepdim)
+    m = squares.m
+    positive = m > 0
+    # sqrt is taken of 1 where the sum is 0, so neither branch's derivative is inf there
+    return SymTensor(ca.if_else(positive, ca.sqrt(ca.if_else(positive, m, 1)), 0), squares.shape_)
+
+
+def _order(name: str, order, allowed=TWO_NORM_ORDERS) -> None:
+    if order not in allowed:
+        raise ExportError(f"{name} of order {order!r} (the export maps the 2-norm only)", current_module())
+
+
+def norm(x, p="fro", dim=None, keepdim=False, out=None, dtype=None):
+    """``torch.norm`` and ``Tensor.norm``."""
+    _order("torch.norm", p)
+    return two_norm(lift(x), dim, keepdim)
+
+
+def vector_norm(x, ord=2, dim=None, keepdim=False, *, dtype=None, out=None):  # noqa: A002 (torch's name)
+    _order("torch.linalg.vector_norm", ord, (2, 2.0))
+    return two_norm(lift(x), dim, keepdim)
+
+
+def linalg_norm(x, ord=None, dim=None, keepdim=False, *, out=None, dtype=None):  # noqa: A002
+    """``torch.linalg.norm``: the vector 2-norm, or a matrix's Frobenius norm (``ord`` None or 'fro')."""
+    x = lift(x)
+    matrix = len(_reduce_dims(x, dim)) == 2 if dim is not None else x.ndim == 2
+    _order("torch.linalg.norm", ord, (None, "fro") if matrix else (None, 2, 2.0))
+    return two_norm(x, dim, keepdim)
+
+
+def normalize(x, p=2.0, dim=1, eps=1e-12, out=None):
+    """``F.normalize``: ``x / max(||x||, eps)`` along ``dim``."""
+    _order("torch.nn.functional.normalize", p, (2, 2.0))
+    x = lift(x)
+    return div(x, clamp(two_norm(x, dim, keepdim=True), min=eps))
 
 
 def _row_max(m):

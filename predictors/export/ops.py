@@ -44,7 +44,19 @@ from predictors.export.layers import (
     scaled_dot_product_attention,
     zeros_like,
 )
-from predictors.export.linalg import einsum, linear, log_softmax, matmul, mean, reduce_sum, softmax
+from predictors.export.linalg import (
+    einsum,
+    linalg_norm,
+    linear,
+    log_softmax,
+    matmul,
+    mean,
+    norm,
+    normalize,
+    reduce_sum,
+    softmax,
+    vector_norm,
+)
 from predictors.export.movement import (
     cat,
     chunk,
@@ -230,6 +242,11 @@ def _functions() -> dict[Any, Callable[..., Any]]:
         F.layer_norm: layer_norm,
         F.scaled_dot_product_attention: scaled_dot_product_attention,
         F.dropout: dropout,
+        torch.norm: norm,
+        torch.Tensor.norm: norm,
+        torch.linalg.norm: linalg_norm,
+        torch.linalg.vector_norm: vector_norm,
+        F.normalize: normalize,
         torch.Tensor.detach: detach,
         torch.Tensor.contiguous: identity,
         torch.Tensor.clone: identity,
@@ -252,4 +269,5 @@ def _methods() -> dict[str, Callable[..., Any]]:
         "new_full": new_full,
         "add": add,
         "relu": HANDLERS[torch.relu],
+        "norm": norm,
     }

@@ -169,7 +169,8 @@ def require_parity(predictor: Exported, n_humans: int, n_robots: int, horizon: i
             f"{' and '.join(parity.nonfinite)} with respect to the robots' plan hold NaN or inf on the "
             "parity scenes: the net evaluates or differentiates an operation where it is infinite (sqrt "
             "of 0, as of an agent's squared distance to itself; 1/x or log at 0): keep its argument from 0 "
-            "(sqrt(d2 + 1e-12)); masking the result afterwards (torch.where, * 0) still leaves NaN gradients",
+            "(a distance as torch.norm(d, dim=-1), whose gradient at 0 is 0, or sqrt(d2 + 1e-12)); masking "
+            "the result afterwards (torch.where, * 0) still leaves NaN gradients",
             predictor.name,
         )
     if not parity.ok():
