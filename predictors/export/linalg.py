@@ -56,6 +56,25 @@ def mean(x, dim=None, keepdim=False, *, dtype=None):
     return SymTensor(total.m / count, total.shape_)
 
 
+def _count_true(x, dim, keepdim) -> tuple[SymTensor, int]:
+    """How many entries over ``dim`` are true (nonzero, as torch reads a number), and of how many."""
+    x = lift(x)
+    nonzero = SymTensor(x.m != 0, x.shape_)  # 0/1, summed exactly
+    return reduce_sum(nonzero, dim, keepdim), math.prod(x.shape_[d] for d in _reduce_dims(x, dim))
+
+
+def any_true(x, dim=None, keepdim=False, *, out=None):
+    """``torch.any`` and ``x.any(dim)``: a mask."""
+    count, _ = _count_true(x, dim, keepdim)
+    return SymTensor(count.m > 0, count.shape_, True)
+
+
+def all_true(x, dim=None, keepdim=False, *, out=None):
+    """``torch.all`` and ``x.all(dim)``: a mask."""
+    count, total = _count_true(x, dim, keepdim)
+    return SymTensor(count.m == total, count.shape_, True)
+
+
 # The 2-norm's names in torch, each with the orders that are the 2-norm of the reduced entries (a matrix's
 # Frobenius norm too); other orders (1, inf, 'nuc', a matrix's spectral ord=2) are refused.
 TWO_NORM_ORDERS = (2, 2.0, "fro", None)

@@ -45,6 +45,8 @@ from predictors.export.layers import (
     zeros_like,
 )
 from predictors.export.linalg import (
+    all_true,
+    any_true,
     einsum,
     linalg_norm,
     linear,
@@ -247,6 +249,10 @@ def _functions() -> dict[Any, Callable[..., Any]]:
         torch.linalg.norm: linalg_norm,
         torch.linalg.vector_norm: vector_norm,
         F.normalize: normalize,
+        torch.any: any_true,
+        torch.all: all_true,
+        torch.Tensor.any: any_true,
+        torch.Tensor.all: all_true,
         torch.Tensor.detach: detach,
         torch.Tensor.contiguous: identity,
         torch.Tensor.clone: identity,
@@ -270,4 +276,6 @@ def _methods() -> dict[str, Callable[..., Any]]:
         "add": add,
         "relu": HANDLERS[torch.relu],
         "norm": norm,
+        "any": any_true,
+        "all": all_true,
     }
