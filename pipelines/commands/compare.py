@@ -36,15 +36,15 @@ faced the same crowd: the same scenario, seed, humans and robots, the crowd made
 same recording, the same placement rules and formation), and the same method (case ignored; with --by-cell,
 sweeps' episodes the same cell, whatever their columns' labels: `--vary mpc.d_min=0.8,1.0`'s 0.8 column is
 Table II's cell). Only episodes every run holds are compared. First each run's folder, episodes and code (the
-commits it names); then, for each method and crowd size, every run's success, collision and contact rates (%)
-and mean travel time over its successes (s), and for each run after the first, against it: +k / −j, the
-episodes where the run has the outcome and the first run not, and the reverse, with the exact McNemar p; the
-mean travel-time difference over the episodes both completed, ± Student's t 95 % half-width, their number in
-brackets; and how many episodes have every metric equal. Last, the settings the compared groups' episodes ran
-with where they differ from the first run's. --plot draws each change with its 95 % interval (the rates' by
-Newcombe's square-and-add for paired proportions; --json holds them too). --expect-identical exits 1 unless
-every episode of every run is in every other with every metric equal: a change that must not move a result
-(`--jit on` against off, a refactoring).
+commits it names, each with its plugins' files); then, for each method and crowd size, every run's success,
+collision and contact rates (%) and mean travel time over its successes (s), and for each run after the first,
+against it: +k / −j, the episodes where the run has the outcome and the first run not, and the reverse, with
+the exact McNemar p; the mean travel-time difference over the episodes both completed, ± Student's t 95 %
+half-width, their number in brackets; and how many episodes have every metric equal. Last, the settings the
+compared groups' episodes ran with where they differ from the first run's. --plot draws each change with its
+95 % interval (the rates' by Newcombe's square-and-add for paired proportions; --json holds them too).
+--expect-identical exits 1 unless every episode of every run is in every other with every metric equal: a
+change that must not move a result (`--jit on` against off, a refactoring).
 """
 MAX_SETTINGS_SHOWN: Final = 12  # per run; the rest counted (--json has them all)
 VALUE_WIDTH: Final = 60  # characters of a setting's values shown

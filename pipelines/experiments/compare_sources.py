@@ -10,6 +10,7 @@ the ``--json`` file of its run episode for episode, every metric equal. Only tho
 
 from __future__ import annotations
 
+import json
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -182,7 +183,9 @@ def _read_episode(
         more = f" (1 of {len(rec.problems)} problems)" if len(rec.problems) > 1 else ""
         _warn(label, f"{file}: {rec.problems[0]}{more}; `crowdmpc review --check` lists every problem")
     meta = rec.metadata.get("crowdmpc", {})
-    commit = commit_text({"commit": meta.get("commit"), "dirty": meta.get("dirty") == "true"})
+    commit = commit_text(
+        {"commit": meta.get("commit"), "dirty": meta.get("dirty") == "true", "plugins": meta.get("plugins")}
+    )
     return {**messages[-1], "config": rec.config()}, _crowd_field(rec.run_meta()), commit
 
 
@@ -204,8 +207,19 @@ def _warn(label: str, text: str) -> None:
 
 def commit_text(code: Any) -> str | None:
     """A run's recorded code as "abc123def456+dirty" ("+dirty:0123abcd": its uncommitted changes' sha256,
-    where recorded); None where it names no commit."""
+    where recorded), then its plugins' files, "(plugin module:Class 0123456789ab)": runs of one commit and
+    two versions of a user's net showed one code. None where it names no commit."""
     commit = code.get("commit") if isinstance(code, dict) else None
     if not commit or commit == "null":
         return None
-    return str(commit)[:12] + dirty_text(code.get("dirty"), code.get("diff_sha256"))
+    text = str(commit)[:12] + dirty_text(code.get("dirty"), code.get("diff_sha256"))
+    plugins = code.get("plugins")
+    if isinstance(plugins, str):  # a recording's metadata holds it as JSON text
+        try:
+            plugins = json.loads(plugins)
+        except ValueError:
+            plugins = None
+    if isinstance(plugins, dict) and plugins:
+        shown = ", ".join(f"plugin {spec} {str(sha)[:12]}" for spec, sha in sorted(plugins.items()))
+        text += f" ({shown})"
+    return text

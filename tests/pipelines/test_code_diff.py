@@ -1,17 +1,20 @@
 """Two runs of one commit with different uncommitted changes recorded the same code ("commit ...,
 dirty: true"): the identity now names the diff by its sha256, shown as "+dirty:0123abcd", and a resume
-after the diff changed says so."""
+after the diff changed says so. compare names a run's plugin files beside its commit."""
 
 from __future__ import annotations
 
 import hashlib
+import json
 import subprocess
 
 import pytest
 
 from pipelines import version
+from pipelines.cli import main
 from pipelines.experiments.compare_sources import commit_text
 from pipelines.logs.review import commit_shown
+from tests.pipelines.test_compare import BASE, _record, _simulate_json, _sweep
 
 
 @pytest.fixture
@@ -58,3 +61,38 @@ def test_a_resume_after_the_uncommitted_changes_changed_says_so():
     assert changed == f"diff_sha256 {'a' * 12} -> {'b' * 12}"
     older = {k: v for k, v in now.items() if k != "diff_sha256"}  # recorded before the diff was: unknown
     assert version.code_changes([older], now) == ""
+
+
+def test_runs_of_one_commit_and_two_versions_of_a_plugin_name_both(tmp_path, capsys):
+    """`crowdmpc compare none=runs/swap cp=runs/swap_cp` of two sweeps of one commit whose plugin net's file
+    had changed between them (code.plugins in sweep.json, in simulate's JSON and a recording's metadata)
+    showed "code 108081654bd7" for both: a comparison of two versions of a user's net read as of one code."""
+    before, after = (
+        {"attn_gru:AttnGRU": "c8d3fb46b1dd" + "0" * 52},
+        {"attn_gru:AttnGRU": "b6ebe69bf509" + "1" * 52},
+    )
+    folders = []
+    for name, plugins in (("before", before), ("after", after)):
+        path = _sweep(tmp_path / name, [_record(i, *o) for i, o in enumerate(BASE)])
+        code = {"commit": "0123456789abcdef", "dirty": False, "plugins": plugins}
+        (path / "sweep.json").write_text(json.dumps({"experiment": "table2", "runs": [{"code": code}]}))
+        folders.append(path)
+    sim = _simulate_json(tmp_path / "run.json", [_record(i, *o) for i, o in enumerate(BASE)])
+    document = json.loads(sim.read_text())
+    document["code"]["plugins"] = after
+    sim.write_text(json.dumps(document))
+    out = tmp_path / "c.json"
+    assert main(["compare", f"a={folders[0]}", f"b={folders[1]}", f"c={sim}", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert f"a: {folders[0]}, 4 episodes, code 0123456789ab (plugin attn_gru:AttnGRU c8d3fb46b1dd)" in text
+    assert f"b: {folders[1]}, 4 episodes, code 0123456789ab (plugin attn_gru:AttnGRU b6ebe69bf509)" in text
+    assert f"c: {sim}, 4 episodes, code fedcba987654+dirty (plugin attn_gru:AttnGRU b6ebe69bf509)" in text
+    assert json.loads(out.read_text())["runs"][1]["code"] == [
+        "0123456789ab (plugin attn_gru:AttnGRU b6ebe69bf509)"
+    ]
+    # a recording's "crowdmpc" metadata holds the plugins as JSON text; a run without plugins shows none
+    meta = {"commit": "0123456789abcdef", "dirty": False, "plugins": json.dumps(before)}
+    assert commit_text(meta) == "0123456789ab (plugin attn_gru:AttnGRU c8d3fb46b1dd)"
+    assert (
+        commit_text(meta | {"plugins": "{}"}) == commit_text(meta | {"plugins": "not json"}) == "0123456789ab"
+    )
