@@ -53,7 +53,10 @@ def test_the_guide_has_every_step():
     steps = [shlex.split(c)[1:4] for c in guide_commands()]  # crowdmpc --plugin X <command>
     mlp, mine = ["--plugin", "window_mlp:WindowMLP"], ["--plugin", "my_controller:GoStraight"]
     assert steps == [
-        *([*mlp, step] for step in ("train", "zoo", "evaluate", "export", "simulate", "sweep")),
+        *([*mlp, step] for step in ("train", "zoo", "evaluate", "export", "simulate", "sweep", "calibrate")),
+        [*mlp, "simulate"],  # with the margins calibrated
+        ["compare", "none=runs/window_mlp_eth.json", "cp0.2=runs/window_mlp_eth-cp.json"],
+        ["review", "runs/window_mlp_eth-cp"],
         *([*mine, step] for step in ("simulate", "sweep")),  # section 6: the controller
     ]
     assert "class GoStraight:" in controller_file()
@@ -92,6 +95,8 @@ def test_the_guide_runs_from_its_own_directory(tmp_path):
     table = (work / "runs" / "swap-window-mlp" / "table.md").read_text()
     assert "window_mlp_eth" in table and "social_lstm_eth" in table
     assert (tmp_path / "zoo" / "window_mlp_eth.pt").is_file()
+    assert "window_mlp_eth" in (tmp_path / "zoo" / "calibrations.json").read_text()
+    assert "| cmpc | 7 | 3 | cp0.2 | 1 |" in "".join(outputs)  # compare paired the runs' one episode
     assert not (ROOT / "checkpoints" / "window_mlp_eth.pt").exists()
     assert (
         "| orca | cmpc | my_controller:GoStraight |"
