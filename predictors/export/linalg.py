@@ -56,6 +56,33 @@ def mean(x, dim=None, keepdim=False, *, dtype=None):
     return SymTensor(total.m / count, total.shape_)
 
 
+def _extreme(x, dim, keepdim, sign: int) -> SymTensor:
+    """The largest (``sign`` 1) or smallest (-1) entry over ``dim``, as torch's amax / amin: the mean of the
+    entries that equal it, so that ties share the gradient evenly, as torch's does (a chain of fmax gave
+    three equal entries 1/4, 1/4 and 1/2). The comparisons' derivative is 0."""
+    x = as_float(lift(x))
+    if not x.shape_:
+        return x
+    dims = _reduce_dims(x, dim)
+    merged, kept = _to_last(x, dims)
+    m = merged.m * sign
+    top = ca.repmat(_row_max(m), 1, m.shape[1])
+    ties = m == top
+    # if_else, not m * ties: an entry of -inf that is not the extreme would make 0 * -inf NaN
+    value = ca.sum2(ca.if_else(ties, merged.m, 0)) / ca.sum2(ties)
+    out = SymTensor(value, kept + (1,))
+    shape = tuple(1 if d in dims else s for d, s in enumerate(x.shape_)) if keepdim else kept
+    return reshape(out, shape)
+
+
+def amax(x, dim=(), keepdim=False, *, out=None):
+    return _extreme(x, dim, keepdim, 1)
+
+
+def amin(x, dim=(), keepdim=False, *, out=None):
+    return _extreme(x, dim, keepdim, -1)
+
+
 def _count_true(x, dim, keepdim) -> tuple[SymTensor, int]:
     """How many entries over ``dim`` are true (nonzero, as torch reads a number), and of how many."""
     x = lift(x)

@@ -46,6 +46,8 @@ from predictors.export.layers import (
 )
 from predictors.export.linalg import (
     all_true,
+    amax,
+    amin,
     any_true,
     einsum,
     linalg_norm,
@@ -253,6 +255,10 @@ def _functions() -> dict[Any, Callable[..., Any]]:
         torch.all: all_true,
         torch.Tensor.any: any_true,
         torch.Tensor.all: all_true,
+        torch.amax: amax,
+        torch.amin: amin,
+        torch.Tensor.amax: amax,
+        torch.Tensor.amin: amin,
         torch.Tensor.detach: detach,
         torch.Tensor.contiguous: identity,
         torch.Tensor.clone: identity,
@@ -278,4 +284,6 @@ def _methods() -> dict[str, Callable[..., Any]]:
         "norm": norm,
         "any": any_true,
         "all": all_true,
+        "amax": amax,
+        "amin": amin,
     }
