@@ -164,6 +164,12 @@ class JointNLP:
         """Build every solver instance a solve may call (``_Solver.build_all``)."""
         self._solver().build_all()
 
+    @property
+    def first_solver(self) -> str:
+        """The solver a solve goes to first: "fatrop" (IPOPT where Fatrop fails) or "ipopt" (alone: the
+        config's choice, or a humans model with IPOPT-only options, a network's L-BFGS)."""
+        return self._solver().primary
+
     def params(self, data: StepData, extra: np.ndarray) -> np.ndarray:
         """The parameter vector for ``data``; ``extra``: the humans model's parameters (by default the
         predictions ``(H, N_h, 2)``)."""

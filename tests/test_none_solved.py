@@ -19,6 +19,8 @@ def test_exact_coupling_with_no_exact_solve_solved_says_so(capsys, monkeypatch):
         "exact_max_iter": 1,
         "steps": 38,
         "statuses": {"Maximum_Iterations_Exceeded": 38},
+        "exact_solver": "ipopt",  # a network's: IPOPT alone
+        "returned_by": {"ipopt": 38},
         "exact_iterations_median": 1.0,
         "exact_iterations_p90": 1.0,
         "exact_ms_median": 3.0,
@@ -31,7 +33,9 @@ def test_exact_coupling_with_no_exact_solve_solved_says_so(capsys, monkeypatch):
     out = capsys.readouterr().out
     assert "nan" not in out
     assert "solved steps: none solved (the exact solve succeeded on none of the 38 steps)" in out
-    no_steps = row | {"steps": 0, "statuses": {}} | {k: math.nan for k in row if k.startswith("exact_")}
+    assert "(38 steps, max_iter 1, IPOPT):" in out and "  IPOPT iterations median 1.0, p90 1.0;" in out
+    no_steps = row | {"steps": 0, "statuses": {}, "returned_by": {}}
+    no_steps |= {k: math.nan for k in row if k.startswith("exact_") and k != "exact_solver"}
     monkeypatch.setattr(exact_coupling, "measure", lambda *args: dict(no_steps))
     assert exact_coupling.main(["--episodes", "1"]) == 0
     out = capsys.readouterr().out
