@@ -26,8 +26,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pipelines.commands import check_data_files, path_arg
+from pipelines.errors import PipelineError
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import count_in, json_on_stdout, output_file, run_main, write_json  # noqa: E402
+from bench_cli import check_not_input, count_in, json_on_stdout, output_file, run_main, write_json  # noqa: E402
 
 # The kinds PredictorModule trains (one loss, one optimiser); the GAN's two-step training is another loop.
 MODELS = ("social_lstm", "vanilla_lstm", "social_gru", "social_attention")
@@ -120,20 +123,31 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--data-dir", default=None, help="data directory (default: $CROWDMPC_DATA)")
     parser.add_argument("--protocol", choices=("paper", "loo"), default="paper")
     parser.add_argument("--dataset", choices=("biwi_eth", "biwi_hotel"), default="biwi_eth")
-    parser.add_argument("--train", nargs="+", type=Path, default=None, metavar="FILE", help="instead")
+    parser.add_argument("--train", nargs="+", type=path_arg, default=None, metavar="FILE", help="instead")
     parser.add_argument("--json", type=output_file, help="also write the rows to this file")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    # Here, before torch and Lightning are imported (a minute on a cold machine): a missing file was refused
+    # only after them, by the data module.
+    try:
+        if args.train:
+            check_data_files("--train", args.train)
+        elif args.data_dir is not None and not Path(args.data_dir).is_dir():
+            raise PipelineError(f"--data-dir {args.data_dir} is not a directory")
+    except PipelineError as exc:
+        parser.error(str(exc))
+    check_not_input(parser, "--json", args.json, args.train or [])
+    return args
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     with json_on_stdout(args.json):
+        files = training_files(args)  # before torch: the protocol's data refused (or prepared) without it
         import torch
 
         from predictors.data.batching import BUCKET_BATCHES
 
         torch.set_num_threads(1)
-        files = training_files(args)
         runs = [Run("shuffled", files, args, None)]
         runs += [Run("by_size", files, args, k) for k in (args.bucket_batches or [None])]
         source = "the --train files" if args.train else f"the {args.protocol} {args.dataset} training files"

@@ -405,3 +405,63 @@ def test_run_all_control_rows_say_how_many_steps_they_timed():
     assert lines[0].startswith("| control step cmpc/social_lstm_eth (7 humans, 50 steps) | 48.02 |")
     assert lines[1].startswith("| control step cmpc/orca_oracle (7 humans, 16 steps) | 59.73 |")
     assert lines[2] == "| control step dmpc (7 humans) | failed | | |"
+
+
+# Each benchmark's file arguments, missing: each refused in one line before torch and Lightning are imported
+BAD_FILES = [
+    ("batching", ["--train", "nope.ndjson"], "--train file nope.ndjson does not exist"),
+    ("batching", ["--train", "."], "--train . is not a data file (a directory or a device)"),
+    ("batching", ["--data-dir", "nope"], "--data-dir nope is not a directory"),
+    ("cost_scale", ["--config", "nope.toml"], "--config nope.toml: no such file"),
+    ("robot_scaling", ["--config", "nope.toml"], "--config nope.toml: no such file"),
+    ("robot_swaps", ["--config", "nope.toml"], "--config nope.toml: no such file"),
+    ("sensor_range", ["--config", "nope.toml"], "--config nope.toml: no such file"),
+    ("plot_scaling", ["nope.json", "--out", "x.png"], "No such file or directory: 'nope.json'"),
+]
+
+_REFUSE_ALL = """
+import contextlib, io, json, sys
+from tests.benchmark_modules import load_benchmark
+sys.path.insert(0, sys.argv[1])
+from bench_cli import run_main
+answers = []
+for script, argv in json.loads(sys.argv[2]):
+    module = load_benchmark(script)
+    err = io.StringIO()
+    sys.argv = [script + ".py", *argv]  # the scripts whose main() reads them there
+    takes_argv = module.main.__code__.co_argcount > 0
+    with contextlib.redirect_stderr(err):
+        try:
+            status = run_main(lambda: module.main(argv) if takes_argv else module.main())
+        except SystemExit as stop:
+            status = stop.code
+    heavy = sorted(m for m in ("torch", "lightning") if m in sys.modules)
+    answers.append([script, status, err.getvalue(), heavy])
+print(json.dumps(answers))
+"""
+
+
+def test_a_missing_file_argument_is_refused_before_torch_is_imported(tmp_path):
+    """batching.py --train nope.ndjson was refused by the data module, after torch and Lightning had been
+    imported: a minute on a cold machine for a mistyped name. Each script runs in one fresh process, in turn,
+    and the heavy libraries are looked for after each refusal."""
+    import os
+    import subprocess
+
+    from tests.benchmark_modules import BENCHMARKS
+
+    cases = json.dumps([[script, argv] for script, argv, _ in BAD_FILES])
+    env = os.environ | {"PYTHONPATH": str(BENCHMARKS.parent)}
+    done = subprocess.run(
+        [sys.executable, "-c", _REFUSE_ALL, str(BENCHMARKS), cases],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    for (script, status, err, heavy), (_, argv, message) in zip(
+        json.loads(done.stdout), BAD_FILES, strict=True
+    ):
+        assert (status, heavy) == (2, []), (script, argv, err)
+        # the error's one line (after argparse's usage, where the parser refused it)
+        last = err.splitlines()[-1]
+        assert last.endswith(message) and "error: " in last and "Traceback" not in err, (script, argv, err)
+    assert list(tmp_path.iterdir()) == []
