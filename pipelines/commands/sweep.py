@@ -102,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
         print_plan(config, cells, tasks, args.reuse, models)
         return 0
 
-    status = 0
+    status, workers = 0, None  # workers: those the run's backend started (None: no run)
     log: LogRead | None = None  # None: the report reads the log
     if not args.report_only:
         check_plan(experiment, cfg, models, folders)
@@ -113,7 +113,8 @@ def run(args: argparse.Namespace) -> int:
         # log is read once (and its planned lines once more, by offset, for episodes.csv), not scanned again
         log = LogRead.of_plan(cells, tasks)
         try:
-            status = run_cells(config, log, models)  # the workers load the weights checked, and their blocks
+            # the workers load the weights checked, and their blocks
+            status, workers = run_cells(config, log, models)
         except SweepStopped:
             report_stopped(config, cells, tasks, log)  # what it recorded stands
             raise
@@ -122,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     elif not (out / EPISODES_FILE).exists():
         raise PipelineError(_nothing_recorded(out))
     if args.report_only or (out / SWEEP_FILE).exists():  # none: stopped before it started, nothing to tell
-        report(config, cells, tasks, report_only=args.report_only, log=log)
+        report(config, cells, tasks, report_only=args.report_only, log=log, workers=workers)
     return stop_status() if status == INTERRUPTED else status  # 143 for SIGTERM (pipelines.loop.interrupt)
 
 

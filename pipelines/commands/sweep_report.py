@@ -82,11 +82,13 @@ def report(
     *,
     report_only: bool = False,
     log: LogRead | None = None,
+    workers: int | None = None,
 ) -> None:
     """Tabulates the planned episodes recorded in --out and projects the plan's CPU time. With
     ``report_only``, records none of which the plan holds are refused (the report is left as it was).
     ``log``: what the sweep read and appended of the log (``LogRead.of_plan`` fed by ``run_sweep``), else
-    the log is read here."""
+    the log is read here. ``workers``: the episodes the run's backend ran at once (``run_cells``), which the
+    projection divides by; None (no run, or a backend that did not say): those ``config`` asks for."""
     from pipelines.experiments.log import EPISODES_FILE
     from pipelines.experiments.zoo_changes import ZooChanges
 
@@ -106,7 +108,7 @@ def report(
         )
     if report_only:
         _note_unrun_cells(cells, log.cells)
-    _write(config, cells, tasks, log)
+    _write(config, cells, tasks, log, workers)
     changed = "" if zoo is None else zoo.note()
     if changed:
         print(f"note: {changed}", file=sys.stderr)
@@ -135,7 +137,13 @@ def report_stopped(
         _write(config, cells, tasks, log)
 
 
-def _write(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask], log: LogRead) -> None:
+def _write(
+    config: SweepConfig,
+    cells: tuple[Cell, ...],
+    tasks: list[EpisodeTask],
+    log: LogRead,
+    workers: int | None = None,
+) -> None:
     from pipelines.experiments.log import EPISODES_FILE
     from pipelines.experiments.report import write_report_of
     from pipelines.experiments.summary import summarize_columns
@@ -152,11 +160,13 @@ def _write(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask
         # CPU time, unlike wall time, does not depend on what else runs on the machine: an honest projection.
         mean = sum(cpu) / len(cpu)
         total = mean * len(tasks)
-        k = 1 if config.backend == "inline" else config.workers  # inline runs one episode at a time
-        workers = f"{k} worker{'s' if k > 1 else ''} on {k} free core{'s' if k > 1 else ''}"
+        # the workers the run's backend started (a Ray cluster may fit fewer than asked: ray_join's
+        # workers_that_fit), else those the sweep asks for; inline runs one episode at a time
+        k = workers or (1 if config.backend == "inline" else config.workers)
+        running = f"{k} worker{'s' if k > 1 else ''} on {k} free core{'s' if k > 1 else ''}"
         print(
             f"CPU per episode {mean:.2f} s (mean of {len(cpu)}); the {len(tasks)} planned episodes take "
-            f"{duration(total)} of CPU: {duration(total / k)} for {workers}",
+            f"{duration(total)} of CPU: {duration(total / k)} for {running}",
             file=sys.stderr,
         )
 

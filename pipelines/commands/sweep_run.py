@@ -39,10 +39,14 @@ def _recorded(config: SweepConfig) -> int:
     return sum(record["key"] in planned for _, _, record in episode_log(config.out).scan(repair=False))
 
 
-def run_cells(config: SweepConfig, log: LogRead | None = None, models: PlanModels | None = None) -> int:
+def run_cells(
+    config: SweepConfig, log: LogRead | None = None, models: PlanModels | None = None
+) -> tuple[int, int | None]:
     """Runs the episodes not yet recorded and says how it went; returns the exit status (EPISODES_RAISED: some
-    episodes raised, INTERRUPTED). ``log``: given every record of the log, those held and those this run
-    appends; ``models``: the plan's checks' reads, whose weights and calibration blocks the workers take."""
+    episodes raised, INTERRUPTED) and the episodes the backend ran at once (None: none started, or it did not
+    say): a Ray cluster may fit fewer than --workers, and the report's CPU projection divides by these.
+    ``log``: given every record of the log, those held and those this run appends; ``models``: the plan's
+    checks' reads, whose weights and calibration blocks the workers take."""
     from pipelines.experiments.sweep import run_sweep
 
     status, records = 0, None if log is None else log.add
@@ -76,4 +80,4 @@ def run_cells(config: SweepConfig, log: LogRead | None = None, models: PlanModel
         why = "" if outcome.backend else " (stopped while its workers started: no episode ran this run)"
         print(f"interrupted: rerun the same command to {again}{why}", file=sys.stderr)
         status = INTERRUPTED
-    return status
+    return status, outcome.workers

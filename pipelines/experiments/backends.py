@@ -52,6 +52,7 @@ GCS_GONE_S: Final[float] = 20.0
 
 class Backend(Protocol):
     name: str
+    # (and, where it says, ``workers``: how many episodes it runs at once, Ray's those the cluster fits)
 
     def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
         """Outcomes in completion order."""
@@ -76,6 +77,7 @@ class InlineBackend:
     """One episode at a time in the driver's own process: for debugging and profiling (pdb, cProfile)."""
 
     name = "inline"
+    workers = 1
 
     def __init__(
         self, record: str, jit: bool = False, scratch_root: str | None = None, timeout_s: float | None = None
@@ -172,6 +174,7 @@ class RayBackend:
             finally:
                 if terminate is not None and threading.current_thread() is threading.main_thread():
                     signal.signal(signal.SIGTERM, terminate)
+        self.workers = workers  # on a cluster, those that fit its free CPUs
         self._gcs = _gcs_endpoint(ray, address)
         self._actor_class: Any = ray.remote(num_cpus=1)(_RayEpisodeWorker)
         self._actor_args = (record, jit, scratch_root, timeout_s)

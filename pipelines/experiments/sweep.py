@@ -68,6 +68,7 @@ class SweepOutcome:
     wall_s: float = 0.0  # this run, from starting the workers to the last record
     startup_s: float = 0.0  # of which starting the workers (processes, or Ray and its actors)
     backend: str = ""
+    workers: int | None = None  # episodes the backend ran at once; None: none started, or it did not say
     interrupted: bool = False
 
     @property
@@ -306,6 +307,7 @@ def _run_tasks(
     start = time.perf_counter()
     backend = backend_factory(config, scratch)
     outcome.backend = backend.name
+    outcome.workers = getattr(backend, "workers", None)  # a backend of one's own may not say
     outcome.startup_s = time.perf_counter() - start
     bar: Any = None
     try:

@@ -229,3 +229,40 @@ def test_a_join_refused_for_its_token_says_so_for_sure(listening, monkeypatch, m
         )
     else:
         assert "; the cluster refused this driver's authentication token (InvalidAuthToken): give " in said
+
+
+def test_a_sweeps_cpu_projection_is_for_the_workers_the_cluster_fits(
+    listening, monkeypatch, capsys, tmp_path
+):
+    """--workers 4 on a cluster with 2 free CPUs runs 2 actors (workers_that_fit), and the report's last line
+    still projected "for 4 workers on 4 free cores": half the wall time the sweep takes. The episodes run
+    inline here, behind the stand-in's RayBackend."""
+    import re
+
+    from pipelines.cli import main
+    from pipelines.experiments import backends
+
+    fake = _backend_ray(monkeypatch)
+    fake.available_resources = lambda: {"CPU": 2.0}  # type: ignore[attr-defined]
+    monkeypatch.setattr(backends, "ray_available", lambda: True)
+    inline = backends.InlineBackend("none")
+    monkeypatch.setattr(backends.RayBackend, "run", lambda self, tasks: inline.run(tasks))
+    monkeypatch.setattr(backends.RayBackend, "close", lambda self: inline.close())
+    sweep = [
+        "sweep",
+        "--experiment",
+        "baselines",
+        "--humans",
+        "2",
+        "--episodes-per-cell",
+        "1",
+        "--jit",
+        "off",
+    ]
+    ray = ["--backend", "ray", "--ray-address", listening, "--workers", "4"]
+    assert main([*sweep, *ray, "--no-progress", "--out", str(tmp_path / "sw")]) == 0
+    err = capsys.readouterr().err
+    assert "has 2 CPUs free for --workers 4: the sweep runs 2 workers" in err
+    assert re.search(
+        r"the 2 planned episodes take (\d+\.\d) s of CPU: .* s for 2 workers on 2 free cores\n", err
+    )

@@ -28,7 +28,7 @@ def test_a_sweep_interrupted_after_its_last_episode_says_nothing_is_left(
     )
     monkeypatch.setattr(sweep_run, "_recorded", lambda config: done)
     config = SimpleNamespace(experiment=SimpleNamespace(name="table2"), out=tmp_path, tasks=lambda: [])
-    assert sweep_run.run_cells(config) == sweep_run.INTERRUPTED  # type: ignore[arg-type]
+    assert sweep_run.run_cells(config) == (sweep_run.INTERRUPTED, None)  # type: ignore[arg-type]
     err = capsys.readouterr().err
     assert f"table2: {done}/4 episodes recorded" in err and said in err
 
@@ -46,9 +46,9 @@ def test_a_sweep_complete_after_its_retries_says_its_errors_are_recorded_since(t
     )
     tasks = [SimpleNamespace(key="a"), SimpleNamespace(key="b")]  # "z": another plan's
     config = SimpleNamespace(experiment=SimpleNamespace(name="table2"), out=tmp_path, tasks=lambda: tasks)
-    assert sweep_run.run_cells(config) == 0  # type: ignore[arg-type]
+    assert sweep_run.run_cells(config) == (0, None)  # type: ignore[arg-type]
     err = capsys.readouterr().err
     assert "lists 1 episode(s) of this plan that raised in an earlier run; each is recorded since" in err
     outcome.ran = 0  # incomplete: the retries are still to come, nothing to say
-    assert sweep_run.run_cells(config) == 0  # type: ignore[arg-type]
+    assert sweep_run.run_cells(config) == (0, None)  # type: ignore[arg-type]
     assert "recorded since" not in capsys.readouterr().err
