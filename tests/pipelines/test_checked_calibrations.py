@@ -5,6 +5,8 @@ nobody checked, caught only by a later resume."""
 
 from __future__ import annotations
 
+import numpy as np
+
 from pipelines.cli import main
 from pipelines.experiments.log import episode_log
 from predictors.calibration_store import save_calibration
@@ -62,23 +64,35 @@ def test_a_sweep_reads_the_calibrations_once(tmp_path, monkeypatch):
 def test_a_resume_checks_the_records_against_the_margins_its_workers_plan_with(tmp_path, monkeypatch):
     """The resume check read calibrations.json again after the plan's checks: a calibrate run between the
     reads refused records of the margins the workers would plan with, or passed records of others."""
-    from pipelines.experiments import sweep
-
     errors, _ = class_errors(4)
     checked = constant_velocity_block(errors)
     save_calibration(checked)
     out = tmp_path / "sweep"
     assert main([*SWEEP, "--episodes-per-cell", "1", "--out", str(out)]) == 0
-    real, saved = sweep.read_recorded, []
-
-    def recalibrating(*args, **kwargs):  # after the plan's checks, before the resume's
-        saved.append(save_calibration(constant_velocity_block(2 * errors)))
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(sweep, "read_recorded", recalibrating)
+    saved = _recalibrated_before(monkeypatch, "read_recorded", 2 * errors)  # the resume's check
     assert main([*SWEEP, "--episodes-per-cell", "2", "--out", str(out)]) == 0
     records = list(episode_log(out).load().values())
     assert saved and len(records) == 8
+    _planned_with(records, checked)
+
+
+def _recalibrated_before(monkeypatch, step: str, errors: np.ndarray) -> list[object]:
+    """A calibrate of ``errors`` run after the plan's checks, as ``pipelines.experiments.sweep.<step>``
+    starts: the blocks it saved (one, once the step ran)."""
+    from pipelines.experiments import sweep
+
+    real, saved = getattr(sweep, step), []
+
+    def recalibrating(*args, **kwargs):
+        saved.append(save_calibration(constant_velocity_block(errors)))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(sweep, step, recalibrating)
+    return saved
+
+
+def _planned_with(records: list[dict], checked) -> None:
+    """Every record planned with the margins of the block the driver ``checked``."""
     for record in records:
         margins = record["config"]["margins"]
         assert margins["margins_m"] == list(checked.quantiles[: len(margins["margins_m"])])
@@ -88,27 +102,17 @@ def test_reuse_checks_the_others_records_against_the_margins_its_workers_plan_wi
     """`sweep --reuse OTHER` checked OTHER's records against a read of calibrations.json of its own, after
     the plan's checks: a calibrate run between the reads refused records of the margins the workers plan
     with (or took records of others)."""
-    from pipelines.experiments import sweep
-
     errors, _ = class_errors(4)
     checked = constant_velocity_block(errors)
     save_calibration(checked)
     other, out = tmp_path / "other", tmp_path / "sweep"
     assert main([*SWEEP, "--episodes-per-cell", "1", "--out", str(other)]) == 0
-    real, saved = sweep.seed_from, []
-
-    def recalibrating(*args, **kwargs):  # after the plan's checks, before --reuse's
-        saved.append(save_calibration(constant_velocity_block(2 * errors)))
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(sweep, "seed_from", recalibrating)
+    saved = _recalibrated_before(monkeypatch, "seed_from", 2 * errors)  # --reuse's check
     assert main([*SWEEP, "--episodes-per-cell", "2", "--reuse", str(other), "--out", str(out)]) == 0
     records = list(episode_log(out).load().values())
     assert saved and len(records) == 8
     assert sum(record["run"] == 1 for record in records) == 4  # OTHER's four, taken (its run, first)
-    for record in records:
-        margins = record["config"]["margins"]
-        assert margins["margins_m"] == list(checked.quantiles[: len(margins["margins_m"])])
+    _planned_with(records, checked)
 
 
 def test_a_resumes_refusal_names_the_block_its_workers_plan_with(tmp_path, monkeypatch, capsys):

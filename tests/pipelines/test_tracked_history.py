@@ -89,6 +89,24 @@ def test_a_current_position_that_is_not_finite_is_said_so():
         check_history(obs)
 
 
+def _taken_or_refused(field: str, value: np.ndarray, message: str | None) -> None:
+    """Both checks of a hand-built observation (the MPC's, ORCA's) take ``field`` = ``value`` (``message``
+    None), or refuse it in ``message``'s words exactly."""
+    import dataclasses
+
+    from pipelines.loop.mpc_setup import check_history
+    from pipelines.loop.observed import check_state
+
+    obs = dataclasses.replace(_late_human(50), **{field: value})
+    for check in (check_history, check_state):
+        if message is None:
+            check(obs)
+            continue
+        with pytest.raises(PipelineError) as refused:
+            check(obs)
+        assert str(refused.value) == message
+
+
 @pytest.mark.parametrize(
     ("present", "got"),
     [
@@ -100,21 +118,8 @@ def test_a_current_position_that_is_not_finite_is_said_so():
 )
 def test_human_present_is_one_boolean_per_human(present, got):
     """Two Trues for one human passed as every human tracked (np.all), and 0.5 as tracked."""
-    import dataclasses
-
-    from pipelines.loop.mpc_setup import check_history
-    from pipelines.loop.observed import check_state
-
-    obs = dataclasses.replace(_late_human(50), human_present=present)
-    for check in (check_history, check_state):
-        if got is None:
-            check(obs)
-            continue
-        with pytest.raises(PipelineError) as refused:
-            check(obs)
-        assert str(refused.value) == (
-            f"obs.human_present must be 1 boolean, one per human (tracked now or not), {got}"
-        )
+    said = "obs.human_present must be 1 boolean, one per human (tracked now or not), "
+    _taken_or_refused("human_present", present, None if got is None else said + got)
 
 
 @pytest.mark.parametrize(
@@ -129,19 +134,5 @@ def test_human_present_is_one_boolean_per_human(present, got):
 def test_robot_reached_is_one_boolean_per_robot(reached, got):
     """0.5 or 2 (a distance, a count) read as arrived (the MPC took ``bool`` of each) and the robot held
     position; 0/1 ints stay taken."""
-    import dataclasses
-
-    from pipelines.loop.mpc_setup import check_history
-    from pipelines.loop.observed import check_state
-
-    obs = dataclasses.replace(_late_human(50), robot_reached=reached)
-    for check in (check_history, check_state):
-        if got is None:
-            check(obs)
-            continue
-        with pytest.raises(PipelineError) as refused:
-            check(obs)
-        assert str(refused.value) == (
-            "obs.robot_reached must be one boolean per robot (has it been within obs.radius of its goal), "
-            + got
-        )
+    said = "obs.robot_reached must be one boolean per robot (has it been within obs.radius of its goal), "
+    _taken_or_refused("robot_reached", reached, None if got is None else said + got)
