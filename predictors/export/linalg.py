@@ -8,7 +8,7 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
-from predictors.export.elementwise import add, clamp, div, mul
+from predictors.export.elementwise import add, clamp, div, mul, sub
 from predictors.export.errors import ExportError, current_module
 from predictors.export.movement import normal_dim, permute, reshape, squeeze, transpose, unsqueeze
 from predictors.export.symbolic import (
@@ -146,6 +146,34 @@ def normalize(x, p=2.0, dim=1, eps=1e-12, out=None):
     _order("torch.nn.functional.normalize", p, (2, 2.0))
     x = lift(x)
     return div(x, clamp(two_norm(x, dim, keepdim=True), min=eps))
+
+
+# torch.cdist's compute modes: each gives the same distances up to rounding (with more than 25 rows torch's
+# default takes them from a matmul, 1.5e-8 off at 0 in float64), and the export computes them directly
+CDIST_MODES = (
+    None,
+    "use_mm_for_euclid_dist_if_necessary",
+    "use_mm_for_euclid_dist",
+    "donot_use_mm_for_euclid_dist",
+)
+
+
+def cdist(x1, x2, p=2.0, compute_mode=None):
+    """``torch.cdist`` for p = 2: ``(..., P, M)`` and ``(..., R, M)``, batch dims broadcast, to the distances
+    ``(..., P, R)``, through ``two_norm``: an agent's distance to itself (0) has torch's gradient there, 0."""
+    _order("torch.cdist", p, (2, 2.0))
+    if compute_mode not in CDIST_MODES:
+        raise ExportError(
+            f"torch.cdist compute_mode {compute_mode!r} (one of {CDIST_MODES})", current_module()
+        )
+    a, b = as_float(lift(x1)), as_float(lift(x2))
+    if a.ndim < 2 or b.ndim < 2 or a.shape_[-1] != b.shape_[-1]:
+        raise ExportError(
+            f"torch.cdist of shapes {a.shape_} and {b.shape_} (expected (..., P, M) and (..., R, M))",
+            current_module(),
+        )
+    # (..., P, 1, M) - (..., 1, R, M): every pair's difference, the batch dims broadcast as torch does
+    return two_norm(sub(unsqueeze(a, -2), unsqueeze(b, -3)), -1)
 
 
 def _row_max(m):
