@@ -16,6 +16,7 @@ so torch folds them itself.
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Callable
 from typing import Any
@@ -182,7 +183,7 @@ class SymTensor:
             raise AttributeError(name)
         method = METHODS.get(name)
         if method is None:
-            raise unsupported(f"tensor method .{name}()")
+            raise unsupported(tensor_member(name))
         return lambda *args, **kwargs: method(self, *args, **kwargs)
 
     __hash__ = object.__hash__
@@ -197,6 +198,19 @@ METHODS: dict[str, Callable[..., Any]] = {}
 
 def call(name: str, *args, **kwargs):
     return METHODS[name](*args, **kwargs)
+
+
+_ABSENT = object()
+
+
+def tensor_member(name: str) -> str:
+    """``name`` as torch.Tensor holds it: "tensor attribute .is_nested" for a property (nn.MultiheadAttention
+    reads query.is_nested: the refusal named it ".is_nested()", a call no one wrote), else "tensor method
+    .cumsum()" (a name torch.Tensor lacks too, as before)."""
+    found = inspect.getattr_static(torch.Tensor, name, _ABSENT)
+    if found is not _ABSENT and not callable(found):
+        return f"tensor attribute .{name}"
+    return f"tensor method .{name}()"
 
 
 def op_name(func: Any) -> str:

@@ -408,8 +408,8 @@ def test_unsupported_operation_names_the_op_and_the_module():
         (
             lambda m, x: m.attn(x, x, x)[0],
             {"attn": nn.MultiheadAttention(4, 2, batch_first=True)},
-            r"unsupported (operation|tensor method) \S+, inside torch\.nn\.MultiheadAttention, a layer "
-            r"the export does not map \(in module 'attn'\)",
+            r"unsupported (operation|tensor method|tensor attribute) \S+, "
+            r"inside torch\.nn\.MultiheadAttention, a layer the export does not map \(in module 'attn'\)",
         ),
         (  # torch.functional's, as torch.cdist was before the export mapped it
             lambda m, x: torch.cartesian_prod(x[0, 0], x[0, 1]),
@@ -430,6 +430,27 @@ def test_unsupported_operation_names_the_layer_the_user_wrote_and_where_the_supp
         export(fn, (1, 3, 4), **modules)
     assert str(info.value).endswith("; the supported operations are listed in docs/extending.md, section 1")
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("fn", "modules", "message"),
+    [
+        (
+            lambda m, x: m.attn(x, x, x)[0],
+            {"attn": nn.MultiheadAttention(4, 2, batch_first=True)},
+            r"unsupported tensor attribute \.is_nested, inside torch\.nn\.MultiheadAttention, a layer the "
+            r"export does not map \(in module 'attn'\); ",
+        ),
+        (lambda m, x: x * x.nbytes, {}, r"unsupported tensor attribute \.nbytes \(in module 'Wrap'\); "),
+    ],
+    ids=["multihead_attention_without_a_mask", "plain"],
+)
+def test_an_unsupported_tensor_attribute_is_named_as_an_attribute(fn, modules, message):
+    """nn.MultiheadAttention called without a mask reads query.is_nested, a property of a tensor: the
+    refusal named it ".is_nested()", a method no one calls."""
+    with pytest.raises(ExportError, match=message) as info:
+        export(fn, (1, 3, 4), **modules)
+    assert "()" not in str(info.value)
 
 
 def test_softmax_of_a_row_of_only_minus_inf_stays_nan_as_in_torch():
