@@ -158,6 +158,7 @@ def _read_episode(
     """The recording's episode (its metrics message with the config it ran), its ``_crowd_field`` and its
     commit; None, warned, where a folder's file has none (``single``: the one file named is refused
     instead)."""
+    from pipelines.logs.identity import null_none
     from pipelines.logs.reader import read_recording
 
     try:
@@ -183,8 +184,15 @@ def _read_episode(
         more = f" (1 of {len(rec.problems)} problems)" if len(rec.problems) > 1 else ""
         _warn(label, f"{file}: {rec.problems[0]}{more}; `crowdmpc review --check` lists every problem")
     meta = rec.metadata.get("crowdmpc", {})
+    # the diff's sha256, as a sweep's code shows it: without it two recordings of one dirty commit read as one
+    # code ("null" where the tree was clean or git could not say; absent in older ones: "+dirty" alone)
     commit = commit_text(
-        {"commit": meta.get("commit"), "dirty": meta.get("dirty") == "true", "plugins": meta.get("plugins")}
+        {
+            "commit": meta.get("commit"),
+            "dirty": meta.get("dirty") == "true",
+            "diff_sha256": null_none(meta.get("diff_sha256")),
+            "plugins": meta.get("plugins"),
+        }
     )
     return {**messages[-1], "config": rec.config()}, _crowd_field(rec.run_meta()), commit
 

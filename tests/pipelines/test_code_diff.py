@@ -96,3 +96,30 @@ def test_runs_of_one_commit_and_two_versions_of_a_plugin_name_both(tmp_path, cap
     assert (
         commit_text(meta | {"plugins": "{}"}) == commit_text(meta | {"plugins": "not json"}) == "0123456789ab"
     )
+
+
+def test_recordings_of_one_commit_with_other_uncommitted_changes_show_their_diffs(
+    tmp_path, monkeypatch, capsys
+):
+    """`crowdmpc compare a=DIR b=DIR` of two `simulate --record` runs of one commit with different uncommitted
+    changes showed "code 0123456789ab+dirty" for both, where a sweep's code names the diff: the recordings'
+    metadata holds its sha256. One recorded before it was (no diff_sha256) shows "+dirty" alone, as before."""
+    from pipelines.logs import recording
+
+    identity = {"version": "0.1.0", "commit": "0123456789abcdef", "dirty": True}
+    runs = {
+        "a": {"diff_sha256": "aaaaaaaa" + "0" * 56},
+        "b": {"diff_sha256": "bbbbbbbb" + "1" * 56},
+        "old": {},
+    }
+    run = ["simulate", "--controller", "cmpc", "--predictor", "constant_velocity", "--humans", "2"]
+    run += ["--episodes", "1", "--seed", "4", "--no-progress", "--record"]
+    for name, diff in runs.items():
+        monkeypatch.setattr(recording, "code_with_plugins", lambda diff=diff: identity | diff)
+        assert main([*run, str(tmp_path / name)]) == 0
+    capsys.readouterr()
+    assert main(["compare", *(f"{name}={tmp_path / name}" for name in runs), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert f"a: {tmp_path / 'a'}, 1 episode, code 0123456789ab+dirty:aaaaaaaa\n" in out
+    assert f"b: {tmp_path / 'b'}, 1 episode, code 0123456789ab+dirty:bbbbbbbb\n" in out
+    assert f"old: {tmp_path / 'old'}, 1 episode, code 0123456789ab+dirty\n" in out
