@@ -96,6 +96,17 @@ def check_not_input(
         parser.error(str(exc))
 
 
+def check_input_files(parser: argparse.ArgumentParser, option: str, paths: Iterable[Path], what: str) -> None:
+    """After parsing: each of ``option``'s ``paths`` an existing regular file, else the parser's one line
+    naming the option, the path and ``what`` it should be (a missing run file was refused with Python's
+    "[Errno 2] No such file or directory: 'nope.json'", which named neither)."""
+    for path in paths:
+        if not path.exists():
+            parser.error(f"{option}: {path} does not exist; expected {what}")
+        if not path.is_file():
+            parser.error(f"{option}: {path} is not a file (a folder or a device); expected {what}")
+
+
 def check_distinct(parser: argparse.ArgumentParser, option: str, values: Sequence[Any]) -> None:
     """After parsing: each of ``option``'s values once (``crowdmpc sweep --humans``'s rule), else the parser's
     one-line error. A repeat ran its rows twice and printed them twice, and where the report is keyed by the

@@ -25,7 +25,9 @@ from pipelines.commands.output_paths import without_missing_parents
 from pipelines.errors import PipelineError
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import check_not_input, run_main  # noqa: E402
+from bench_cli import check_input_files, check_not_input, run_main  # noqa: E402
+
+RUN_FILE = "a robot_scaling.py --json file"  # what each of the runs is, as a refusal names it
 
 CONTROL_PERIOD_MS = 400.0  # the paper's dt = 0.4 s: a step slower than this misses its period
 EMPTY_WHAT = {"robots": "robots M", "humans": "humans N"}  # a panel's axis, as its note names it
@@ -218,11 +220,16 @@ def main(argv: list[str] | None = None) -> int:
         help="the figure to write, in the format its suffix names (none: .png is added)",
     )
     args = parser.parse_args(argv)
+    check_input_files(parser, "runs", args.runs, RUN_FILE)
     check_not_input(parser, "--out", args.out, args.runs)
     try:
         reports = [(str(path), json.loads(path.read_text(encoding="utf-8"))) for path in args.runs]
         pts = points(reports)
-    except (OSError, ValueError) as exc:  # json.JSONDecodeError is a ValueError
+    except OSError as exc:  # found by the parser but unreadable (no permission): named as a missing one is
+        raise PipelineError(
+            f"runs: cannot read {exc.filename} ({exc.strerror}); expected {RUN_FILE}"
+        ) from None
+    except ValueError as exc:  # json.JSONDecodeError is a ValueError
         raise PipelineError(str(exc)) from None
     plot(pts, args.out)
     alone = undrawn(pts)

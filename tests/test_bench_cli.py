@@ -416,7 +416,11 @@ BAD_FILES = [
     ("robot_scaling", ["--config", "nope.toml"], "--config nope.toml: no such file"),
     ("robot_swaps", ["--config", "nope.toml"], "--config nope.toml: no such file"),
     ("sensor_range", ["--config", "nope.toml"], "--config nope.toml: no such file"),
-    ("plot_scaling", ["nope.json", "--out", "x.png"], "No such file or directory: 'nope.json'"),
+    (
+        "plot_scaling",
+        ["nope.json", "--out", "x.png"],
+        "runs: nope.json does not exist; expected a robot_scaling.py --json file",
+    ),
 ]
 
 _REFUSE_ALL = """

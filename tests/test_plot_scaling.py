@@ -85,6 +85,48 @@ def test_the_same_row_in_two_files_is_named(tmp_path, capsys):
         plot_scaling.points([("w.json", wrong)])
 
 
+@pytest.mark.parametrize(
+    ("name", "message"),
+    [
+        ("nope.json", "nope.json does not exist; expected a robot_scaling.py --json file"),
+        (".", ". is not a file (a folder or a device); expected a robot_scaling.py --json file"),
+    ],
+)
+def test_a_run_file_that_is_missing_or_a_folder_is_refused_naming_the_argument(
+    name, message, tmp_path, capsys, monkeypatch
+):
+    """plot_scaling.py nope.json said Python's "[Errno 2] No such file or directory: 'nope.json'", naming
+    neither the argument nor what it should be; a folder, "[Errno 21] Is a directory: '.'"."""
+    monkeypatch.chdir(tmp_path)
+    run = tmp_path / "m.json"
+    run.write_text(json.dumps(M_RUN))
+    with pytest.raises(SystemExit) as stop:
+        plot_scaling.main([str(run), name, "--out", "fig.png"])
+    assert stop.value.code == 2
+    (line,) = [line for line in capsys.readouterr().err.splitlines() if not line.startswith("usage:")]
+    assert line.endswith(f"error: runs: {message}")
+    assert [p.name for p in tmp_path.iterdir()] == ["m.json"]
+
+
+def test_a_run_file_that_cannot_be_read_is_named(tmp_path, capsys, monkeypatch):
+    """One the parser found but that cannot be read (no permission) said "[Errno 13] Permission denied"."""
+    from pathlib import Path
+
+    run = tmp_path / "m.json"
+    run.write_text(json.dumps(M_RUN))
+
+    def refuse(path: Path, *args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(Path, "read_text", refuse)
+    args = [str(run), "--out", str(tmp_path / "fig.png")]
+    assert plot_scaling.run_main(lambda: plot_scaling.main(args)) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.endswith(
+        f" error: runs: cannot read {run} (Permission denied); expected a robot_scaling.py --json file"
+    )
+
+
 def test_main_writes_the_figure(tmp_path):
     paths = []
     for i, report in enumerate([M_RUN, *N_RUNS]):
