@@ -27,6 +27,13 @@ from pathlib import Path
 from typing import Any
 
 from pipelines.commands import check_data_files, path_arg
+from pipelines.commands.train_data import (
+    DATASET_SUFFIX,
+    DEFAULT_DATASET,
+    DEFAULT_PROTOCOL,
+    PROTOCOLS,
+    protocol_options,
+)
 from pipelines.errors import PipelineError
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -121,14 +128,19 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument("--seed", type=count_in("seed", 0), default=0)
     parser.add_argument("--data-dir", default=None, help="data directory (default: $CROWDMPC_DATA)")
-    parser.add_argument("--protocol", choices=("paper", "loo"), default="paper")
-    parser.add_argument("--dataset", choices=("biwi_eth", "biwi_hotel"), default="biwi_eth")
+    # None by default: given with --train files, they are refused, as crowdmpc train refuses them
+    parser.add_argument("--protocol", choices=PROTOCOLS, default=None, help=f"default {DEFAULT_PROTOCOL}")
+    parser.add_argument(
+        "--dataset", choices=tuple(DATASET_SUFFIX), default=None, help=f"default {DEFAULT_DATASET}"
+    )
     parser.add_argument("--train", nargs="+", type=path_arg, default=None, metavar="FILE", help="instead")
     parser.add_argument("--json", type=output_file, help="also write the rows to this file")
     args = parser.parse_args(argv)
     # Here, before torch and Lightning are imported (a minute on a cold machine): a missing file was refused
     # only after them, by the data module.
     try:
+        # they were ignored without a word: the run trained on the --train files alone
+        protocol_options(args, bool(args.train), files="--train")
         if args.train:
             check_data_files("--train", args.train)
         elif args.data_dir is not None and not Path(args.data_dir).is_dir():
@@ -136,6 +148,8 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     except PipelineError as exc:
         parser.error(str(exc))
     check_not_input(parser, "--json", args.json, args.train or [])
+    if not args.train:  # --train files: no protocol or dataset (null in the --json file's args)
+        args.protocol, args.dataset = args.protocol or DEFAULT_PROTOCOL, args.dataset or DEFAULT_DATASET
     return args
 
 

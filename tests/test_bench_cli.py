@@ -445,27 +445,51 @@ print(json.dumps(answers))
 """
 
 
-def test_a_missing_file_argument_is_refused_before_torch_is_imported(tmp_path):
-    """batching.py --train nope.ndjson was refused by the data module, after torch and Lightning had been
-    imported: a minute on a cold machine for a mistyped name. Each script runs in one fresh process, in turn,
-    and the heavy libraries are looked for after each refusal."""
+def _refused_before_torch(cases: list[tuple[str, list[str], str]], folder) -> None:
+    """Each script and command line of ``cases`` run in one fresh process, in turn, in ``folder``: refused in
+    one line ending in its message, exit 2, torch and Lightning not imported after it, nothing written."""
     import os
     import subprocess
 
     from tests.benchmark_modules import BENCHMARKS
 
-    cases = json.dumps([[script, argv] for script, argv, _ in BAD_FILES])
+    argvs = json.dumps([[script, argv] for script, argv, _ in cases])
     env = os.environ | {"PYTHONPATH": str(BENCHMARKS.parent)}
     done = subprocess.run(
-        [sys.executable, "-c", _REFUSE_ALL, str(BENCHMARKS), cases],
-        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
+        [sys.executable, "-c", _REFUSE_ALL, str(BENCHMARKS), argvs],
+        cwd=folder, env=env, capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
-    for (script, status, err, heavy), (_, argv, message) in zip(
-        json.loads(done.stdout), BAD_FILES, strict=True
-    ):
+    for (script, status, err, heavy), (_, argv, message) in zip(json.loads(done.stdout), cases, strict=True):
         assert (status, heavy) == (2, []), (script, argv, err)
         # the error's one line (after argparse's usage, where the parser refused it)
         last = err.splitlines()[-1]
         assert last.endswith(message) and "error: " in last and "Traceback" not in err, (script, argv, err)
-    assert list(tmp_path.iterdir()) == []
+    assert list(folder.iterdir()) == []
+
+
+def test_a_missing_file_argument_is_refused_before_torch_is_imported(tmp_path):
+    """batching.py --train nope.ndjson was refused by the data module, after torch and Lightning had been
+    imported: a minute on a cold machine for a mistyped name. Each script runs in one fresh process, in turn,
+    and the heavy libraries are looked for after each refusal."""
+    _refused_before_torch(BAD_FILES, tmp_path)
+
+
+def test_batchings_protocol_options_with_train_files_are_refused_as_crowdmpc_train_refuses_them(tmp_path):
+    """batching.py --train F --protocol loo (or --dataset, --data-dir) trained on F alone, the options ignored
+    without a word, where `crowdmpc train` refuses them; now in its words, before torch is imported."""
+    replace = "(explicit files replace the prepared files of --protocol, --dataset and --data-dir); give one "
+    replace += "or the other"
+    train = ["--train", "nope.ndjson"]  # refused for the options before the file is looked for
+    _refused_before_torch(
+        [
+            ("batching", [*train, "--protocol", "loo"], f"--protocol does not go with --train {replace}"),
+            ("batching", [*train, "--dataset", "biwi_eth"], f"--dataset does not go with --train {replace}"),
+            (
+                "batching",
+                ["--data-dir", ".", *train, "--protocol", "paper"],
+                f"--protocol and --data-dir do not go with --train {replace}",
+            ),
+        ],
+        tmp_path,
+    )

@@ -85,11 +85,12 @@ def resolve_files(args) -> tuple[dict[str, list[Path]], Path | None]:
     return files, prepared_dir(args.data_dir)
 
 
-def protocol_options(args: argparse.Namespace, explicit: bool) -> None:
+def protocol_options(args: argparse.Namespace, explicit: bool, files: str = "--train/--val") -> None:
     """PipelineError when --protocol, --dataset or --data-dir are given with explicit --train/--val files,
     which replace the prepared files those options choose (they were ignored without a word, and the run
     recorded as "custom"). $CROWDMPC_DATA is no option typed, and passes. Their defaults are filled in by
-    ``take_run_data``, once a resume has taken the run's."""
+    ``take_run_data``, once a resume has taken the run's. ``files``: the explicit files' options, as named
+    (benchmarks/batching.py has --train alone)."""
     given = [
         option
         for option, value in (
@@ -102,7 +103,7 @@ def protocol_options(args: argparse.Namespace, explicit: bool) -> None:
     if explicit and given:
         verb = "does" if len(given) == 1 else "do"
         raise PipelineError(
-            f"{' and '.join(given)} {verb} not go with --train/--val (explicit files replace the prepared "
+            f"{' and '.join(given)} {verb} not go with {files} (explicit files replace the prepared "
             "files of --protocol, --dataset and --data-dir); give one or the other"
         )
 
