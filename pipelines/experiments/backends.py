@@ -34,6 +34,7 @@ from pipelines.experiments.ray_join import (
     address_from_environment,
     join_cluster,
     joining_from_environment,
+    stopped_answering,
     workers_that_fit,
 )
 from pipelines.experiments.tasks import EpisodeTask
@@ -175,6 +176,7 @@ class RayBackend:
                 if terminate is not None and threading.current_thread() is threading.main_thread():
                     signal.signal(signal.SIGTERM, terminate)
         self.workers = workers  # on a cluster, those that fit its free CPUs
+        self._local = self._owns_ray and address is None  # a Ray of its own: no cluster to wait for
         self._gcs = _gcs_endpoint(ray, address)
         self._actor_class: Any = ray.remote(num_cpus=1)(_RayEpisodeWorker)
         self._actor_args = (record, jit, scratch_root, timeout_s)
@@ -280,12 +282,7 @@ class RayBackend:
             silent_since = now if silent_since is None else silent_since
             if now - silent_since >= GCS_GONE_S:
                 self._gcs_gone = True  # close() then leaves Ray alone: its calls wait on the GCS
-                host, port = self._gcs
-                raise SweepStopped(
-                    f"the Ray cluster stopped answering (its GCS at {host}:{port}, for {GCS_GONE_S:g} s: "
-                    "`ray stop`, or its head lost); the episodes recorded stay, and the same command "
-                    "runs the rest once the cluster is back"
-                )
+                raise SweepStopped(stopped_answering(self._local, *self._gcs, GCS_GONE_S))
 
     def close(self) -> None:
         if self._gcs_gone:  # Ray's kill and shutdown wait on the lost GCS until Ray ends the process

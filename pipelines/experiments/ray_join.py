@@ -37,6 +37,22 @@ def joining_from_environment(address: str) -> None:
     )
 
 
+def stopped_answering(local: bool, host: str, port: int, silent_s: float) -> str:
+    """Why a sweep stopped when its Ray's GCS went silent. A sweep's own local Ray (no --ray-address, no
+    $RAY_ADDRESS) has no cluster to come back: a rerun starts a new one, so it is not told to wait."""
+    if local:
+        return (
+            f"this sweep's own local Ray stopped answering (its GCS at {host}:{port}, for {silent_s:g} s: "
+            "`ray stop` on this machine, or its processes killed); the episodes recorded stay, and the same "
+            "command runs the rest on a new local Ray"
+        )
+    return (
+        f"the Ray cluster stopped answering (its GCS at {host}:{port}, for {silent_s:g} s: "
+        "`ray stop`, or its head lost); the episodes recorded stay, and the same command "
+        "runs the rest once the cluster is back"
+    )
+
+
 def join_cluster(ray: Any, address: str, env: dict[str, Any], given: str = "--ray-address") -> None:
     """``ray.init`` on a cluster's address; its failures (no cluster there, an address Ray cannot parse) are
     one line naming the address: they are the user's input, not a bug. Ray's client retries a silent port

@@ -1529,12 +1529,18 @@ def test_the_help_names_the_experiments_that_refuse_margins_and_conventions(caps
     assert {said.group(2)} == fixed
 
 
-@pytest.mark.parametrize("lost_first", [True, False], ids=["actor-lost-too", "cluster-alone"])
-def test_a_ray_cluster_that_stops_answering_stops_the_sweep_in_one_line(lost_first, monkeypatch):
+@pytest.mark.parametrize(
+    ("lost_first", "local"),
+    [(True, False), (False, False), (False, True)],
+    ids=["actor-lost-too", "cluster-alone", "own-local-ray"],
+)
+def test_a_ray_cluster_that_stops_answering_stops_the_sweep_in_one_line(lost_first, local, monkeypatch):
     """`ray stop` on the cluster's head mid-sweep: Ray's driver waited on the lost GCS (for a replacement
     actor's code check, or for episodes), then ended the process after 60 s (exit 1, a C++ log line, no
     report). The backend now tries the GCS's port while nothing comes back and stops the sweep itself
-    (SweepStopped: the command reports what was recorded) once it has not answered for GCS_GONE_S."""
+    (SweepStopped: the command reports what was recorded) once it has not answered for GCS_GONE_S.
+    local: the sweep's own Ray (no --ray-address, no $RAY_ADDRESS), whose line said to wait for "the
+    cluster" to be back; there is none, and the same command starts a new local Ray."""
     import socket
     import types
 
@@ -1569,17 +1575,27 @@ def test_a_ray_cluster_that_stops_answering_stops_the_sweep_in_one_line(lost_fir
         raise _FakeActorDied("The actor died unexpectedly before finishing this task.")
 
     fake = types.ModuleType("ray")
-    fake.is_initialized = lambda: True  # type: ignore[attr-defined]
+    fake.is_initialized = lambda: not local  # type: ignore[attr-defined]
+    fake.init = lambda address, **_: address == "local" or pytest.fail(address)  # type: ignore[attr-defined]
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
     fake.remote = lambda **_: lambda cls: types.SimpleNamespace(remote=actor)  # type: ignore[attr-defined]
     fake.wait, fake.get = wait, get  # type: ignore[attr-defined]
     fake.exceptions = types.SimpleNamespace(RayActorError=_FakeActorDied)  # type: ignore[attr-defined]
     gcs = types.SimpleNamespace(gcs_address=f"127.0.0.1:{port}")
     fake.get_runtime_context = lambda: gcs  # type: ignore[attr-defined]
     fake.kill = lambda a: pytest.fail("Ray's kill waits on the lost GCS")  # type: ignore[attr-defined]
+    fake.shutdown = lambda: pytest.fail("Ray's shutdown waits on the lost GCS")  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "ray", fake)
     backend = backends.RayBackend(1, "none", address=None)
     tasks = [types.SimpleNamespace(key=k) for k in "ab"]
-    with pytest.raises(SweepStopped, match=r"^the Ray cluster stopped answering \(its GCS at 127\.0\.0\.1"):
+    said = (
+        r"^this sweep's own local Ray stopped answering \(its GCS at 127\.0\.0\.1:\d+, for 0\.05 s: "
+        r"`ray stop` on this machine, or its processes killed\); the episodes recorded stay, and the same "
+        r"command runs the rest on a new local Ray$"
+        if local
+        else r"^the Ray cluster stopped answering \(its GCS at 127\.0\.0\.1.*once the cluster is back$"
+    )
+    with pytest.raises(SweepStopped, match=said):
         list(backend.run(tasks))
     backend.close()
     assert len(actors) == (2 if lost_first else 1)
