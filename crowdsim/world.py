@@ -117,6 +117,14 @@ def sensor_range_beyond(value: float) -> str | None:
     return f"must be at {side} {bound:g} m, got {float(value)!r}"
 
 
+def sensor_range_refused(value: float) -> str | None:
+    """``sensor_range_beyond`` naming what it bounds, "the sensor range must be at most 1000 m, got 2000.0":
+    the one wording of sweep's and calibrate's refusals after the option's name ("--sensor-range: ..."), which
+    had calibrate say "--sensor-range must be at most ..." where a sweep said the line above."""
+    beyond = sensor_range_beyond(value)
+    return None if beyond is None else f"the sensor range {beyond}"
+
+
 WORLD: Final[WorldFacts] = WorldFacts()
 DT: Final[float] = WORLD.dt
 OBS_LEN: Final[int] = WORLD.obs_len

@@ -371,14 +371,14 @@ def sensor_range_refusal(predictor: str, sensor_range: float | None) -> str | No
     holds blocks of ``predictor`` made behind it before the bound: the same calibrate again was refused in
     the bound's words alone, as if none were stored, where they stay in force (a run behind the nearest
     range plans with one)."""
-    from crowdsim.world import is_sensor_range, sensor_range_beyond
+    from crowdsim.world import is_sensor_range, sensor_range_refused
     from predictors.calibration_store import stored_calibrations
     from predictors.errors import PredictorError
 
     if sensor_range is None or not is_sensor_range(sensor_range):
         return None
-    beyond = sensor_range_beyond(sensor_range)
-    if beyond is None:
+    refused = sensor_range_refused(sensor_range)
+    if refused is None:
         return None
     try:
         stored = stored_calibrations()
@@ -386,11 +386,11 @@ def sensor_range_refusal(predictor: str, sensor_range: float | None) -> str | No
         stored = []
     made = [(path, b) for path, b in stored if b.predictor == predictor and b.sensor_range == sensor_range]
     if not made:
-        return f"--sensor-range {beyond}"
+        return f"--sensor-range: {refused}"
     files = ", ".join(sorted({str(path) for path, _ in made}))
     alphas = ", ".join(f"{b.alpha:g}" for _, b in made)
     return (
-        f"--sensor-range {beyond}; {files} holds {predictor}'s closed-loop margins behind a "
+        f"--sensor-range: {refused}; {files} holds {predictor}'s closed-loop margins behind a "
         f"{sensor_range:g} m sensor (alpha {alphas}), made before that bound: they stay, as `crowdmpc zoo "
         "calibrations` lists them"
     )

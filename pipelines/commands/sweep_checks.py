@@ -194,15 +194,15 @@ def check_sensor_ranges(experiment: Experiment, folders: Iterable[Path | None] =
     ``crowdsim.world.SENSOR_RANGE``, as the sensor checks it as it is built (``RangeLimited``), refused here,
     not once per episode in errors.jsonl; a --report-only of a folder that ran beyond them runs no such
     check. The refusal names the one of ``folders`` (``check_plan``'s) that ran the range before its bound."""
-    from crowdsim.world import sensor_range_beyond
+    from crowdsim.world import sensor_range_refused
     from pipelines.config.recorded import ran_beyond_bound_in
 
     for world in (experiment.world, *experiment.method_worlds.values()):
         sensed = world.sensor_range
-        beyond = None if sensed is None else sensor_range_beyond(sensed)
-        if beyond is not None:
+        refused = None if sensed is None else sensor_range_refused(sensed)
+        if refused is not None:
             ran = ran_beyond_bound_in(folders, "simulate", "sensor_range", sensed)
-            raise PipelineError(f"the sensor range {beyond}{ran}")
+            raise PipelineError(f"{refused}{ran}")
 
 
 def check_neighbor_distances(experiment: Experiment, folders: Iterable[Path | None] = ()) -> None:

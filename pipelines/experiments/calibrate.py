@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any, Final, NamedTuple, cast
 import numpy as np
 
 from crowdsim.scenarios import MAX_HUMANS
-from crowdsim.world import is_sensor_range, sensor_range_beyond
+from crowdsim.world import is_sensor_range, sensor_range_refused
 from pipelines.errors import PipelineError
 from pipelines.loop.margins import MarginSpec
 from pipelines.loop.motion_classes import observed_classes
@@ -164,9 +164,9 @@ class ClosedLoopPlan:
             raise PipelineError(
                 f"--sensor-range must be a finite number of metres > 0, got {self.sensor_range!r}"
             )
-        beyond = None if self.sensor_range is None else sensor_range_beyond(self.sensor_range)
-        if beyond is not None:  # a plan of the command line's: no record reads back through it
-            raise PipelineError(f"--sensor-range {beyond}")
+        refused = None if self.sensor_range is None else sensor_range_refused(self.sensor_range)
+        if refused is not None:  # a plan of the command line's: no record reads back through it
+            raise PipelineError(f"--sensor-range: {refused}")
         if not isinstance(self.sensor_tracks, bool):  # a truthy "no" would report them
             raise PipelineError(f"sensor_tracks must be True or False, got {self.sensor_tracks!r}")
         if not self.sensor_tracks and self.sensor_range is None:

@@ -151,7 +151,7 @@ def test_a_rerun_of_a_calibrate_beyond_the_range_bound_added_since_names_the_blo
         assert main(argv) == 0
     stored = tmp_path / "zoo" / "calibrations.json"
     held = stored.read_text()
-    bound = "crowdmpc calibrate: error: --sensor-range must be at most 1000 m, got"
+    bound = "crowdmpc calibrate: error: --sensor-range: the sensor range must be at most 1000 m, got"
     for extra in ([], ["--dry-run"]):
         capsys.readouterr()
         assert main([*argv, *extra]) == 2

@@ -82,5 +82,19 @@ def test_a_calibration_behind_a_sensor_is_refused_them_as_it_is_planned():
 
     with pytest.raises(PipelineError) as exc:
         ClosedLoopPlan("constant_velocity", sensor_range=1e300)
-    assert str(exc.value) == "--sensor-range must be at most 1000 m, got 1e+300"
+    assert str(exc.value) == "--sensor-range: the sensor range must be at most 1000 m, got 1e+300"
     assert ClosedLoopPlan("constant_velocity", sensor_range=1000.0).sensor_range == 1000.0
+
+
+def test_calibrate_refuses_them_in_a_sweeps_words(capsys, tmp_path):
+    """calibrate said "--sensor-range must be at most 1000 m, got 2000.0" where a sweep says "--sensor-range:
+    the sensor range must be at most ...": both now take crowdsim.world.sensor_range_refused's words."""
+    calibrate = ["calibrate", "--predictor", "constant_velocity", "--source", "closed-loop", "--no-progress"]
+    sweep = ["sweep", "--experiment", "baselines", "--humans", "1", "--episodes-per-cell", "1", "--dry-run"]
+    sweep += ["--out", str(tmp_path / "sweep")]
+    said = {}
+    for command, extra in ((calibrate, ["--dry-run"]), (calibrate, []), (sweep, [])):
+        code, _, err = run(capsys, *command, *extra, "--sensor-range", "2000")
+        assert code == 2
+        said[(command[0], *extra)] = one_line(err).split(": error: ", 1)[1]
+    assert set(said.values()) == {"--sensor-range: the sensor range must be at most 1000 m, got 2000.0"}
