@@ -20,7 +20,7 @@ from typing import Any, Final
 
 import numpy as np
 
-from crowdsim.world import is_sensor_range
+from crowdsim.world import is_sensor_range, sensor_range_refused
 from predictors.base import DT, Predictor
 from predictors.conformal import MIN_ALPHA, alpha_text, check_alpha, min_samples, step_counts, step_quantiles
 from predictors.conformal_classes import ClassMargins, class_margins
@@ -219,6 +219,21 @@ class Calibration:
             )
         except PredictorError as exc:
             raise PredictorError(f"{where}: {exc}") from None
+
+
+def beyond_remaking(block: Calibration) -> str:
+    """Empty where a refusal about ``block`` may quote the command of its own view to make it again, else why
+    not: a block made behind a sensor range beyond crowdsim.world.SENSOR_RANGE (stored before that bound; it
+    stays usable) is one calibrate refuses now, so the refusal quotes the command of the view asked for, whose
+    block is planned with before it (calibration_store.view_distance: the same view first)."""
+    made = block.sensor_range
+    refused = None if made is None else sensor_range_refused(made)
+    if refused is None:
+        return ""
+    return (
+        f"; the block was made behind a {made:g} m sensor before calibrate bounded the range ({refused}) and "
+        "cannot be made again: the command makes one of the view asked for, planned with before it"
+    )
 
 
 def calibration_from_errors(

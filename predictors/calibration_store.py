@@ -20,7 +20,7 @@ from pathlib import Path
 from types import EllipsisType
 from typing import Final
 
-from predictors.calibration import SOURCES, Calibration
+from predictors.calibration import SOURCES, Calibration, beyond_remaking
 from predictors.checkpoint import read_document
 from predictors.conformal import alpha_text, check_alpha
 from predictors.durable import write_text_durably
@@ -356,12 +356,14 @@ def locate_calibration(
     path, block = min(found, key=lambda found: view_distance(found[1].key()[3:], wanted))
     expected = current_sha256(predictor, directory) if sha256 is ... else sha256
     if block.predictor_sha256 != expected:
-        command = recalibrate_command(predictor, source, alpha, *block.key()[3:], kind=kind)
+        why = beyond_remaking(block)  # "": the block's own view's command makes it again
+        view = wanted if why else block.key()[3:]
+        command = recalibrate_command(predictor, source, alpha, *view, kind=kind)
         behind = _behind(block.sensor_range, block.sensor_tracks)
         raise PredictorError(
             f"{path}: the {source} calibration at alpha={alpha_text(alpha)}{behind} of "
             f"predictor {predictor!r} was made for weights sha256 {block.predictor_sha256}, but the weights "
-            f"now have sha256 {expected}; the weights changed since calibration, recalibrate: {command}"
+            f"now have sha256 {expected}; the weights changed since calibration, recalibrate: {command}{why}"
         )
     return path, block
 

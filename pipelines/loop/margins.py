@@ -179,15 +179,18 @@ class MarginSpec:
         block = (at or self._located(predictor, horizon, sha256))[1]
         table = class_tables(block)[self.mode]
         if table is None:
+            from predictors.calibration import beyond_remaking
             from predictors.calibration_store import recalibrate_command
             from predictors.conformal import alpha_text
 
             assert predictor is not None  # _block refused None
-            command = recalibrate_command(predictor, self.source, self.alpha, *block.key()[3:])
+            why = beyond_remaking(block)  # "": the block's own view's command makes it again
+            view = (self.sensor_range, self.sensor_tracks) if why else block.key()[3:]
+            command = recalibrate_command(predictor, self.source, self.alpha, *view)
             raise PipelineError(
                 f"the {self.source} calibration of {predictor!r} at alpha={alpha_text(self.alpha)} has no "
                 f"{self.mode} margins per motion class (made before they existed, or too few samples in a "
-                f"class for this alpha); recalibrate with enough episodes: {command} --episodes 200"
+                f"class for this alpha); recalibrate with enough episodes: {command} --episodes 200{why}"
             )
         return table
 

@@ -57,6 +57,25 @@ def test_a_calibration_without_class_margins_is_refused(tmp_path, monkeypatch):
         assert str(caught.value).endswith(command)
 
 
+def test_a_block_without_class_margins_made_beyond_the_sensor_range_bound_quotes_a_command_calibrate_runs(
+    tmp_path, monkeypatch
+):
+    """Stored behind a 2000 m sensor before crowdsim.world.SENSOR_RANGE's 1000 m, the block's refusal quoted
+    `--sensor-range 2000 --episodes 200`, which calibrate refuses now: it quotes the run's view's command."""
+    # no shipped block: one seeing everyone would be taken before it
+    monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path))
+    errors, _ = class_errors(4)
+    save_calibration(constant_velocity_block(errors, details={"sensor_range": 2000.0}), tmp_path)
+    with pytest.raises(PipelineError) as caught:
+        parse_margins("conformal-motion").resolve_classes("constant_velocity", 4, None)
+    assert str(caught.value).endswith(
+        "recalibrate with enough episodes: crowdmpc calibrate --predictor constant_velocity --source "
+        "closed-loop --alpha 0.1 --episodes 200; the block was made behind a 2000 m sensor before calibrate "
+        "bounded the range (the sensor range must be at most 1000 m, got 2000.0) and cannot be made again: "
+        "the command makes one of the view asked for, planned with before it"
+    )
+
+
 def _margins(controller, obs) -> np.ndarray:
     return controller._crowd_allowances(obs, np.zeros((1, 4)), np.zeros(1, bool))["human_margins"]
 

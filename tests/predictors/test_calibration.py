@@ -469,6 +469,27 @@ def test_find_calibration_refuses_other_weights(tmp_path):
     assert "weights changed since calibration, recalibrate: crowdmpc calibrate --predictor" in message
 
 
+@pytest.mark.parametrize("asked", [None, 3.0])
+def test_a_stale_block_made_beyond_the_sensor_range_bound_quotes_a_command_calibrate_runs(tmp_path, asked):
+    """A block stored behind a 2000 m sensor before crowdsim.world.SENSOR_RANGE's 1000 m, its weights changed
+    since: the refusal quoted `--sensor-range 2000`, a command calibrate refuses now. It quotes the command of
+    the view asked for (whose block is planned with first) and says why; a block within the bound, its own."""
+    save_calibration(block(source="closed-loop", details={"sensor_range": 2000.0}), tmp_path)
+    save_calibration(block(source="closed-loop", alpha=0.2, details={"sensor_range": 3.0}), tmp_path)
+    with pytest.raises(PredictorError) as stale:
+        find_calibration("social_lstm_eth", "closed-loop", 0.1, tmp_path, sha256=SHA_B, sensor_range=asked)
+    sensor = "" if asked is None else " --sensor-range 3"
+    assert str(stale.value).endswith(
+        "recalibrate: crowdmpc calibrate --predictor social_lstm_eth --source closed-loop --alpha 0.1"
+        f"{sensor}; the block was made behind a 2000 m sensor before calibrate bounded the range (the sensor "
+        "range must be at most 1000 m, got 2000.0) and cannot be made again: the command makes one of the "
+        "view asked for, planned with before it"
+    )
+    with pytest.raises(PredictorError) as own:
+        find_calibration("social_lstm_eth", "closed-loop", 0.2, tmp_path, sha256=SHA_B, sensor_range=asked)
+    assert str(own.value).endswith("--alpha 0.2 --sensor-range 3")
+
+
 def test_find_calibration_reads_the_current_weights_from_the_zoo(tmp_path):
     entry = zoo.ZooEntry(
         "social_lstm_eth", "SocialLSTMPredictor", "social_lstm", "w.pt", SHA_A, "w.json", SHA_B, "paper"
