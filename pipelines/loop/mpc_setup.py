@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, NoReturn
 import numpy as np
 
 from crowdsim.scenarios import MAX_HUMANS
-from crowdsim.world import WORLD, WorldFacts
+from crowdsim.world import LEAST, WORLD, WorldFacts
 from mpc.config import MPCConfig
 from pipelines.errors import PipelineError
 from pipelines.loop.margins import CALIBRATED_MODES
@@ -221,14 +221,16 @@ def check_contact_distance(world: WorldFacts, cfg: MPCConfig, radius_settable: b
     of their radii that distance is a contact, which the MPC then accepts in its plans (``--set
     mpc.d_min=0.5``, 9 humans, seeds 0-5: within 0.8 m of a human in 6 of 6 episodes, in contact in 1). A
     d_min equal to ``2 radius`` is allowed: agents that touch without overlapping. ``radius_settable``: the
-    run may change [world] radius (a sweep may not), so the message offers it."""
+    run may change [world] radius (a sweep may not), so the message offers it, unless it is already the
+    world's least (crowdsim.world.LEAST), where a smaller one is refused."""
     contact = 2.0 * world.radius
+    smaller = radius_settable and world.radius > LEAST["radius"][0]
     if cfg.d_min < contact - 1e-12:
         raise PipelineError(
             f"the MPC's d_min {cfg.d_min:g} m is below the contact distance 2 x [world] radius = "
             f"{contact:g} m: its plans would touch humans and teammates (Eqs. 11 and 12 keep d_min between "
             f"centres); set [mpc] d_min >= {contact:g} (--set mpc.d_min={contact:g})"
-            + (", or a smaller [world] radius" if radius_settable else "")
+            + (", or a smaller [world] radius" if smaller else "")
         )
 
 
