@@ -274,7 +274,7 @@ def _check_keys(name: str, keys: np.ndarray) -> None:
         raise SimulationError(
             f"recording {name!r}: frame and pedestrian ids in rows must be integers: rows[{bad[0]}] has "
             f"frame {float(keys[bad[0], 0])!r}, pedestrian {float(keys[bad[0], 1])!r} ({bad.size} of "
-            f"{len(keys)} rows)"
+            f"{counted(len(keys), 'row')})"
         )
     whole = keys.astype(np.int64)
     _, first, inverse = np.unique(whole, axis=0, return_index=True, return_inverse=True)
@@ -283,9 +283,10 @@ def _check_keys(name: str, keys: np.ndarray) -> None:
     if repeats.size:
         row = repeats[0]
         frame, person = whole[row].tolist()
+        held = counted(repeats.size, "duplicate (frame, pedestrian) row")
         raise SimulationError(
-            f"recording {name!r}: rows hold {repeats.size} duplicate (frame, pedestrian) rows; the first is "
-            f"rows[{row}]: frame {frame}, pedestrian {person}, already at rows[{first_of_key[row]}]"
+            f"recording {name!r}: rows hold {held}; the first is rows[{row}]: frame {frame}, pedestrian "
+            f"{person}, already at rows[{first_of_key[row]}]"
         )
 
 

@@ -47,7 +47,7 @@ def test_a_recording_holds_each_track_on_the_frame_grid_and_knows_its_gaps():
     [
         (
             (6, 7, 9.0, 9.0),
-            "recording 'hotel': rows hold 1 duplicate (frame, pedestrian) rows; the first is rows[2]: "
+            "recording 'hotel': rows hold 1 duplicate (frame, pedestrian) row; the first is rows[2]: "
             "frame 6, pedestrian 7, already at rows[1]",
         ),
         (
@@ -70,6 +70,15 @@ def test_rows_that_name_one_person_twice_at_a_frame_or_no_whole_frame_or_id_are_
     with pytest.raises(SimulationError) as info:
         Recording.from_rows("hotel", rows, frame_step=6)
     assert str(info.value) == message
+
+
+def test_a_count_of_one_row_is_said_in_the_singular():
+    """One row of one row, "(1 of 1 rows)"; two duplicates keep the plural."""
+    with pytest.raises(SimulationError, match=r"pedestrian 7\.5 \(1 of 1 row\)$"):
+        Recording.from_rows("hotel", np.array([(0, 7.5, 1.0, 2.0)]), frame_step=6)
+    rows = np.array([(0, 7, 1.0, 2.0), (0, 7, 1.5, 2.0), (0, 7, 2.0, 2.0)])
+    with pytest.raises(SimulationError, match=r"rows hold 2 duplicate \(frame, pedestrian\) rows; the first"):
+        Recording.from_rows("hotel", rows, frame_step=6)
 
 
 def test_frames_too_far_apart_or_too_large_are_refused_before_any_grid_is_filled():
