@@ -20,6 +20,14 @@ def _private_cache_root(_session_cache, monkeypatch):
 
 
 @pytest.fixture(autouse=True)
+def _no_ray_cluster_from_the_environment(monkeypatch):
+    """A sweep joins the cluster $RAY_ADDRESS names, as ray.init does (pipelines.experiments.ray_join):
+    under a developer's exported RAY_ADDRESS, the Ray tests' local sweeps ran on that cluster. A test that
+    means one sets it."""
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+
+
+@pytest.fixture(autouse=True)
 def _private_user_zoo(tmp_path_factory, monkeypatch):
     """Every test gets an empty user zoo of its own (never the real ~/.local/share/crowdmpc/zoo), and no
     plugins from the environment; what a test sets (``--plugin`` sets CROWDMPC_PLUGINS or
