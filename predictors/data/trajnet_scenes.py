@@ -45,6 +45,7 @@ from predictors.base import OBS_LEN, PRED_LEN
 from predictors.data.validate import rows_by_pedestrian
 from predictors.durable import replace_durably
 from predictors.progress import progress_bar
+from predictors.text_table import counted
 
 # Converter defaults (trajnetplusplusdataset convert.py arguments, scene.py constants).
 CHUNK_SIZE: Final[int] = OBS_LEN + PRED_LEN  # 21 rows = 9 observed + 12 predicted
@@ -115,9 +116,10 @@ def _check_tracks(tracks: np.ndarray) -> np.ndarray:
     if repeats.size:
         row = repeats[0]
         frame, ped = keys[row].tolist()
+        held = counted(repeats.size, "duplicate (frame, pedestrian) row")
         raise ValueError(
-            f"tracks hold {repeats.size} duplicate (frame, pedestrian) rows; the first is tracks[{row}]: "
-            f"frame {frame}, pedestrian {ped}, already at tracks[{first_of_key[row]}]"
+            f"tracks hold {held}; the first is tracks[{row}]: frame {frame}, pedestrian {ped}, already at "
+            f"tracks[{first_of_key[row]}]"
         )
     return tracks
 

@@ -210,6 +210,8 @@ def _spoilt(kind):
         tracks[9, 3] = np.inf
     elif kind == "fractional":
         tracks[5, 0] = 20.5  # frame 20, pedestrian 2
+    elif kind == "one duplicate":
+        tracks[10, 0] = 10  # frame 50, pedestrian 1 -> frame 10, as row 2
     else:
         tracks[6, 1] = 2  # frame 30, pedestrian 1 -> 2, as row 7
         tracks[10, 0] = 10  # frame 50, pedestrian 1 -> frame 10, as row 2
@@ -233,6 +235,11 @@ def _spoilt(kind):
             "duplicate",
             "tracks hold 2 duplicate (frame, pedestrian) rows; the first is tracks[7]: frame 30, "
             "pedestrian 2, already at tracks[6]",
+        ),
+        (  # one: "1 duplicate (frame, pedestrian) rows" before
+            "one duplicate",
+            "tracks hold 1 duplicate (frame, pedestrian) row; the first is tracks[10]: frame 10, "
+            "pedestrian 1, already at tracks[2]",
         ),
     ],
 )
