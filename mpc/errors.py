@@ -3,7 +3,16 @@ CLI without a traceback."""
 
 
 class MPCConfigError(ValueError):
-    """An MPC configuration value outside its valid range, named with the value and what is expected."""
+    """An MPC configuration value outside its valid range, named with the value and what is expected.
+    ``field``: the MPCConfig field refused, where one is (callers name where it was chosen, and whether a
+    folder ran it before its bound)."""
+
+    def __init__(self, message: str, field: str | None = None):
+        super().__init__(message)
+        self.field = field
+
+    def __reduce__(self) -> tuple[type, tuple[object, ...]]:
+        return type(self), (str(self), self.field)
 
 
 class CompileCacheError(RuntimeError):

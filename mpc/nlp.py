@@ -76,10 +76,10 @@ def check_solvable(cfg: MPCConfig) -> None:
     its --report-only and config show --from-sweep refused it."""
     for name, (most, unit) in MPC_BOUNDS.items():
         if getattr(cfg, name) > most:
-            raise MPCConfigError(f"{name} must be at most {most:g}{unit}, got {getattr(cfg, name)!r}")
+            raise MPCConfigError(f"{name} must be at most {most:g}{unit}, got {getattr(cfg, name)!r}", name)
     for name, (least, unit) in MPC_LEAST.items():
         if getattr(cfg, name) < least:
-            raise MPCConfigError(f"{name} must be at least {least:g}{unit}, got {getattr(cfg, name)!r}")
+            raise MPCConfigError(f"{name} must be at least {least:g}{unit}, got {getattr(cfg, name)!r}", name)
 
 
 class FixedPredictions:

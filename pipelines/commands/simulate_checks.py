@@ -137,7 +137,7 @@ def check_mpc_solvable(config: RunConfig, folders: Sequence[Path | None] = ()) -
     try:
         check_nlp(config.mpc)
     except MPCConfigError as exc:
-        key = str(exc).partition(" ")[0]  # its message starts with the field it refuses
+        key = str(exc.field)  # check_solvable names the field it refuses
         ran = ran_beyond_bound_in(folders, "mpc", key, getattr(config.mpc, key))
         raise config.error("mpc", key, reason(str(exc), key) + ran) from None
 

@@ -235,7 +235,7 @@ def check_solvable_values(experiment: Experiment, folders: Iterable[Path | None]
         try:
             check_solvable(config)
         except MPCConfigError as exc:
-            key = str(exc).partition(" ")[0]  # its message starts with the field it refuses
+            key = exc.field or ""  # check_solvable names the field it refuses
             ran = ran_beyond_bound_in(folders, "mpc", key, getattr(config, key, None))
             raise MPCConfigError(f"{exc}{ran}") from None
 
