@@ -163,7 +163,7 @@ def _write(
         # the workers the run's backend started (a Ray cluster may fit fewer than asked: ray_join's
         # workers_that_fit), else those the sweep asks for; inline runs one episode at a time
         k = workers or (1 if config.backend == "inline" else config.workers)
-        running = f"{k} worker{'s' if k > 1 else ''} on {k} free core{'s' if k > 1 else ''}"
+        running = f"{counted(k, 'worker')} on {counted(k, 'free core')}"
         print(
             f"CPU per episode {mean:.2f} s (mean of {len(cpu)}); the {len(tasks)} planned episodes take "
             f"{duration(total)} of CPU: {duration(total / k)} for {running}",

@@ -20,6 +20,7 @@ from pipelines.errors import PipelineError
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.loop.contract import checked_description
 from pipelines.loop.controllers import Controller
+from predictors.text_table import counted
 
 
 class WeightsReplaced(PipelineError):
@@ -75,7 +76,7 @@ def stopped_by(refusal: str, recorded: int, out: Path) -> str:
     if recorded == 0:
         kept = f"no episode of it is recorded in {out} yet"
     else:
-        kept = f"the {recorded} episode{'s' if recorded > 1 else ''} recorded in {out} kept"
+        kept = f"the {counted(recorded, 'episode')} recorded in {out} kept"
     return f"{refusal} (the sweep stopped at the first episode that loaded them, {kept})"
 
 
