@@ -26,7 +26,7 @@ CasADi's ``system()``, which held every signal's handler until gcc returned (a s
 on up to 8 s) and ignored SIGINT in the process (`kill -INT` of it was lost): CasADi's nlpsol generates the
 source, runs the shell's no-op ``:`` as compiler and linker and fails to load the library not made yet; gcc
 compiles and links it in a process group of its own (on the main thread; off it, in the caller's, which a
-terminal's Ctrl-C reaches), which a signal to the process stops at once; the same
+terminal's Ctrl-C reaches), which a signal to the process stops at once (on Linux a SIGKILL too); the same
 nlpsol again generates the same source (checked) and loads the library, byte for byte the one CasADi's own
 compile made. The second code generation costs about 1 % of a compile (3 robots, 7 humans, at load 7:
 0.4 s of CMPC's 31 s, 0.1 s of DMPC's 9 s).

@@ -5,6 +5,7 @@ runs in their place."""
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import os
 import shlex
 import shutil
@@ -99,8 +100,9 @@ def run_compiler(command: list[str], step: str, check: Check) -> None:
     held every signal's handler until gcc returned, 8 s for CMPC's NLP. On the main thread gcc runs in a
     process group of its own, so that its whole group (cc1, as, ld) is stopped when the compile is: by a
     KeyboardInterrupt, or ``check`` raising for an ending signal (polled every POLL_S); off it, in the
-    caller's group, which a terminal's Ctrl-C reaches. RuntimeError when gcc fails, in CasADi's
-    words (``step``: "Compilation" or "Linking"); KeyboardInterrupt when a SIGINT ended gcc itself."""
+    caller's group, which a terminal's Ctrl-C reaches. On Linux gcc also ends when this process does, by a
+    SIGKILL too (ends_with_this_process). RuntimeError when gcc fails, in CasADi's words (``step``:
+    "Compilation" or "Linking"); KeyboardInterrupt when a SIGINT ended gcc itself."""
     # Off the main thread no signal reaches this code (Python runs handlers in the main thread alone): gcc
     # stays in the caller's process group there, so that a terminal's Ctrl-C reaches it as before, ends it
     # and comes back as a KeyboardInterrupt; in a group of its own it ran on after its process had exited.
@@ -112,15 +114,18 @@ def run_compiler(command: list[str], step: str, check: Check) -> None:
         spawn = _Spawn(command, own_group, output)
         try:
             spawn.start()
-            spawn.join()
+            spawn.wait_started()
             started = spawn.started
             if not isinstance(started, subprocess.Popen):  # gcc gone since it was found: the shell's 127 was
                 raise RuntimeError(f'{step} failed. Tried "{shlex.join(command)}": {started}')  # failed
             status = _wait(started, check)
         finally:
             process = spawn.cancel()
-            if process is not None and process.returncode is None:  # stopped while gcc runs: its group goes
-                _stop_group(process, own_group)
+            try:  # stopped while gcc runs: its group goes
+                if process is not None and process.returncode is None:
+                    _stop_group(process, own_group)
+            finally:
+                spawn.finish()
         _pass_on(output)
     if status in (-signal.SIGINT, 130):
         raise KeyboardInterrupt
@@ -128,11 +133,56 @@ def run_compiler(command: list[str], step: str, check: Check) -> None:
         raise RuntimeError(f'{step} failed. Tried "{shlex.join(command)}"')
 
 
+# prctl(2)'s option: the signal a process gets when the thread that forked it ends (Linux; <sys/prctl.h>)
+PR_SET_PDEATHSIG: Final[int] = 1
+
+
+@cache
+def _prctl() -> Callable[..., int] | None:
+    """libc's prctl, resolved here and not in the forked child (no dlopen between fork and exec); None off
+    Linux, where gcc keeps today's behaviour: a SIGKILL of this process leaves it to finish."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    prctl.argtypes = [ctypes.c_int, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong]
+    prctl.restype = ctypes.c_int
+    return prctl
+
+
+def ends_with_this_process(parent: int | None = None) -> Callable[[], None] | None:
+    """What the forked child runs before it execs gcc, so that gcc ends with this process, a SIGKILL of it
+    included (no handler, no ``finally`` runs: gcc ran on for seconds and wrote its object file into the
+    cache); None where prctl is not there. The signal is SIGTERM, on which gcc's driver removes its
+    temporary files (a SIGKILL left cc1's assembly in /tmp: 0.6 MB for CMPC's NLP, 2 robots, 3 humans), or
+    SIGKILL where this process ignores SIGTERM, as gcc then would. The driver's children (cc1, as, ld) are
+    not signalled: one running goes on to its end (cc1: seconds, into the deleted file), and none starts
+    after. The thread that forks gcc must outlive it (_Spawn): the signal comes when it ends. A parent gone
+    when the child asks (killed between fork and prctl) is not waited for: the child exits. ``parent``:
+    the process the child expects to be forked by (default: this one)."""
+    prctl = _prctl()
+    if prctl is None:
+        return None
+    parent = os.getpid() if parent is None else parent
+    ignored = signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+    death = int(signal.SIGKILL if ignored else signal.SIGTERM)
+
+    def in_the_child() -> None:  # between fork and exec: no imports, no allocation beyond the call
+        prctl(PR_SET_PDEATHSIG, death, 0, 0, 0)
+        if os.getppid() != parent:  # orphaned before the prctl took effect: no signal will come
+            os._exit(1)
+
+    return in_the_child
+
+
 class _Spawn(threading.Thread):
     """Starts ``command`` (in a process group of its own: ``own_group``) in a thread of its own: a
     KeyboardInterrupt raised in the main thread inside Popen (gcc running, Popen waiting to learn that its
     exec worked) lost the Popen, and gcc ran on (a Ctrl-C test's stand-in outlived its program). ``cancel``
-    returns the process, if any: none starts after it."""
+    returns the process, if any: none starts after it. The thread lives on until ``finish``: on Linux
+    gcc's parent-death signal comes when the thread that forked it ends (ends_with_this_process)."""
 
     def __init__(self, command: list[str], own_group: bool, output: IO[bytes]) -> None:
         super().__init__(name="crowdmpc-gcc", daemon=True)
@@ -142,27 +192,41 @@ class _Spawn(threading.Thread):
         self.started: subprocess.Popen | OSError | None = None
         self._lock = threading.Lock()  # held while Popen runs
         self._cancelled = False
+        self._tried = threading.Event()  # set once Popen has returned or raised (or was cancelled)
+        self._done = threading.Event()  # set once gcc is reaped: the thread may end
 
     def run(self) -> None:
-        with self._lock:
-            if self._cancelled:
-                return
-            try:
-                group = 0 if self.own_group else None
+        try:
+            with self._lock:
+                if self._cancelled:
+                    return
                 self.started = subprocess.Popen(
                     self.command,
                     stdin=subprocess.DEVNULL,
                     stdout=self.output,
                     stderr=subprocess.STDOUT,
-                    process_group=group,
+                    process_group=0 if self.own_group else None,
+                    preexec_fn=ends_with_this_process(),
                 )
-            except OSError as exc:
-                self.started = exc
+        except OSError as exc:
+            self.started = exc
+        finally:
+            self._tried.set()
+        if isinstance(self.started, subprocess.Popen):
+            self._done.wait()
+
+    def wait_started(self) -> None:
+        """Until Popen has returned (gcc running) or failed."""
+        self._tried.wait()
 
     def cancel(self) -> subprocess.Popen | None:
         with self._lock:  # a Popen under way ends first
             self._cancelled = True
         return self.started if isinstance(self.started, subprocess.Popen) else None
+
+    def finish(self) -> None:
+        """Let the thread end: gcc is reaped, or is to end with it."""
+        self._done.set()
 
 
 def _wait(process: subprocess.Popen, check: Check) -> int:
