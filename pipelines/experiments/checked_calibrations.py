@@ -6,7 +6,8 @@ other machines), looked each up again, reading the file once a cell as they buil
 `calibrate` run in between (a recalibration under the same alpha keeps the cell key) had them plan with, and
 record, margins nobody checked, which only a later resume caught. The driver hands each task its method's
 block (``with_checked_calibrations``, ``EpisodeTask.calibration``) and the worker builds the controller with
-it: the file is read once a run, and the resume check checks the records against those same blocks.
+it (a plugin's own lookups of its margins find it: pipelines.loop.margins_handed): the file is read once a
+run, and the resume check checks the records against those same blocks.
 """
 
 from __future__ import annotations

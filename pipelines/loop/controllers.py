@@ -102,7 +102,8 @@ class ControllerReads:
     """What a shipped MPC reads of the zoo as it is built, read already by the command that builds it
     (simulate, whose notes describe them): read again, a `zoo add --replace` or a calibrate run between the
     reads had the notes describe other weights or another block than the controller planned with. A
-    plugin loads its own predictor, of the entry located already (``located``)."""
+    plugin loads its own predictor, of the entry located already (``located``), and its lookups of its
+    spec's margins, as it is built, find the block of ``calibration`` (pipelines.loop.margins_handed)."""
 
     # the one spec.predictor names; None: loaded as the MPC is built; Refused: its load refused, raised there
     predictor: Predictor | Refused | None = None
@@ -197,7 +198,9 @@ def _build_plugin(
     (``spec.predictor`` for a plugin with ``uses_predictor``, else None), is a one-line PipelineError naming
     the plugin. An unknown ``spec.predictor`` is refused first for a plugin with ``uses_predictor``, as the
     shipped MPCs refuse it when they load it (``UnknownPredictor``); one whose zoo entry the command located
-    (``read.located``) is known, and the plugin's ``load_predictor`` of it loads that entry."""
+    (``read.located``) is known, and the plugin's ``load_predictor`` of it loads that entry; its lookups
+    of ``spec.margins`` find the block ``read.calibration`` holds (``handing_calibration``)."""
+    from pipelines.loop.margins_handed import handing_calibration
     from predictors.registry import handing
 
     located = read.located if read.located is not ... and read.located is not None else None
@@ -209,8 +212,10 @@ def _build_plugin(
         names = available()  # every name load_predictor accepts
         if spec.predictor not in names:
             raise UnknownPredictor(spec.predictor, names)
+    # the block of a lookup that found one (not a refusal, nor None: no block needed) for the plugin's own
+    at = read.calibration if isinstance(read.calibration, tuple) else None
     try:
-        with handing(located):
+        with handing(located), handing_calibration(spec.margins, spec.predictor_name, at):
             controller = plugin.cls(spec, env_config, jit=jit)
     except PipelineError:
         raise

@@ -218,6 +218,10 @@ class MarginSpec:
                 f"the ORCA oracle knows the simulator, not real people, so it has no real calibration: plan "
                 f"with its closed-loop one (margins conformal:{alpha_text(self.alpha)}) or leave it out"
             )
+        if blocks is None:  # the block its command looked up, where one was handed (a plugin being built)
+            from pipelines.loop.margins_handed import handed_blocks
+
+            blocks = handed_blocks(self, predictor)
         return locate_calibration(
             predictor,
             self.source,

@@ -6,8 +6,10 @@ nobody checked, caught only by a later resume."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from pipelines.cli import main
+from pipelines.errors import PipelineError
 from pipelines.experiments.log import episode_log
 from predictors.calibration_store import save_calibration
 from tests.calibration_blocks import class_errors, constant_velocity_block
@@ -145,3 +147,88 @@ def test_a_resumes_refusal_names_the_block_its_workers_plan_with(tmp_path, monke
         "(records: your calibration of 2026-01-01 10:00 UTC, now: your calibration of 2026-01-02 10:00 UTC)"
         in error
     )
+
+
+# ---- plugin controllers: built as Class(spec, env_config, jit=...), they take no block as an argument
+PLUGIN = "tests.plugins.margin_controller:MarginMPC"  # CMPC wrapped, as a user's plugin would
+WITH_PLUGIN = ["--plugin", PLUGIN, *SWEEP[:4], f"cmpc,{PLUGIN}", *SWEEP[5:]]
+
+
+def test_a_plugin_wrapping_the_mpc_plans_with_the_margins_the_driver_checked(tmp_path, monkeypatch):
+    """The shipped controllers were handed the checked block; a plugin wrapping MPCController looked its
+    margins up again in the worker, and planned with (and recorded) the block a calibrate run saved after the
+    driver's check: [1.12, 2.24, 3.36, 4.48] m where CMPC planned with [0.56, 1.12, 1.68, 2.24]."""
+    errors, _ = class_errors(4)
+    checked = constant_velocity_block(errors)
+    save_calibration(checked)
+    saved = _recalibrate_at_start(monkeypatch, constant_velocity_block(2 * errors))
+    out = tmp_path / "sweep"
+    assert main([*WITH_PLUGIN, "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    records = list(episode_log(out).load().values())
+    assert saved and sorted(r["controller"] for r in records) == ["cmpc", "cmpc", "margin_mpc", "margin_mpc"]
+    _planned_with(records, checked)
+
+
+def test_a_sweep_with_a_plugin_reads_the_calibrations_once(tmp_path, monkeypatch):
+    """The driver's read, and none in the plugin's worker (inline here: its build read the file once a
+    cell)."""
+    from predictors import zoo
+
+    save_calibration(constant_velocity_block(class_errors(4)[0]))
+    user = zoo.user_zoo_dir().resolve()
+    opened = count_opens(monkeypatch, "calibrations.json")
+    assert main([*WITH_PLUGIN, "--episodes-per-cell", "1", "--out", str(tmp_path / "sweep")]) == 0
+    assert opened[user / "calibrations.json"] == 1
+
+
+def _plugin_spec(alpha: float = 0.1):
+    from pipelines.loop.controllers import ControllerSpec, register_controller_plugins
+    from pipelines.loop.margins import MarginSpec
+
+    register_controller_plugins([PLUGIN])
+    return ControllerSpec(PLUGIN, predictor="constant_velocity", margins=MarginSpec("conformal", alpha=alpha))
+
+
+def test_make_controller_hands_a_plugin_the_block_read_for_its_margins(tmp_path):
+    """``make_controller(spec, read=ControllerReads(calibration=...))`` (a sweep worker's call) hands a
+    plugin's own lookup of ``spec``'s margins the block given, not calibrations.json's; the plugin's
+    constructor is the documented one. Outside the build, and for other margins, the file is read."""
+    from pipelines.loop.controllers import ControllerReads, make_controller
+
+    errors, _ = class_errors(4)
+    now = constant_velocity_block(2 * errors)
+    save_calibration(now)
+    read = (tmp_path / "calibrations.json", constant_velocity_block(errors))  # the command's, checked
+    spec = _plugin_spec()
+    controller = make_controller(spec, read=ControllerReads(calibration=read))
+    margins = controller.describe()["config"]["margins"]
+    assert margins["margins_m"] == list(read[1].quantiles[: len(margins["margins_m"])])
+    assert spec.margins.located("constant_velocity", 4, None)[1].quantiles == now.quantiles
+    other = make_controller(_plugin_spec(), read=ControllerReads())  # nothing read: the file's
+    assert other.describe()["config"]["margins"]["margins_m"] == list(now.quantiles[:4])
+
+
+def test_a_handed_block_is_still_checked_against_the_plugins_weights(tmp_path):
+    """The block handed is found as the file's would be: one made for other weights is refused as such."""
+    import dataclasses
+
+    from pipelines.loop.controllers import ControllerReads, make_controller
+
+    block = dataclasses.replace(constant_velocity_block(class_errors(4)[0]), predictor_sha256="ab" * 32)
+    with pytest.raises(PipelineError, match="was made for weights sha256 abab"):
+        make_controller(_plugin_spec(), read=ControllerReads(calibration=(tmp_path / "c.json", block)))
+
+
+def test_a_plugins_lookup_of_other_margins_is_handed_nothing(tmp_path):
+    """A block is handed only to the margins and predictor it was looked up for: a lookup at another alpha
+    reads the files (here: the shipped zoo's block at 0.2)."""
+    from pipelines.loop.margins import MarginSpec
+    from pipelines.loop.margins_handed import handing_calibration
+    from predictors.zoo import checkpoints_dir
+
+    spec = _plugin_spec()
+    read = (tmp_path / "calibrations.json", constant_velocity_block(class_errors(4)[0]))
+    with handing_calibration(spec.margins, "constant_velocity", read):
+        assert spec.margins.located("constant_velocity", 4, None) == read
+        path, block = MarginSpec("conformal", alpha=0.2).located("constant_velocity", 4, None)
+    assert path == checkpoints_dir() / "calibrations.json" and block.alpha == 0.2
