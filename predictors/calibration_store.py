@@ -286,10 +286,12 @@ def calibrate_command(
     alphas: Sequence[float] = (),
     *,
     kind: str | None | EllipsisType = ...,
+    view: tuple[float | None, bool] | None = None,
     **changed: object,
 ) -> str:
     """The ``crowdmpc calibrate`` command line that makes ``block`` again, at ``alphas`` (default its own)
-    with the settings it records (``made_with``) but those ``changed`` (``episodes=400``); ``kind`` as
+    with the settings it records (``made_with``) but those ``changed`` (``episodes=400``), behind the sensor
+    of ``view`` (sensor range, track lengths given; None: the block's own); ``kind`` as
     ``recalibrate_command`` takes it."""
     alpha = ",".join(alpha_text(a) for a in alphas or (block.alpha,))
     settings = made_with(block) | {key: str(value) for key, value in changed.items()}
@@ -297,7 +299,7 @@ def calibrate_command(
         f"{_crowdmpc(block.predictor, kind)} calibrate --predictor {block.predictor} --source {block.source} "
         f"--alpha {alpha}"
         + "".join(f" --{key} {value}" for key, value in settings.items())
-        + _sensor_options(block.sensor_range, block.sensor_tracks)
+        + _sensor_options(*(view or (block.sensor_range, block.sensor_tracks)))
     )
 
 

@@ -9,6 +9,7 @@ import sys
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, humans_list, path_arg, write_output
+from pipelines.commands.calibrate_checks import sensor_range_refusal, wide_margins_notes
 from pipelines.commands.calibrate_help import EPILOG, option_helps
 from pipelines.commands.calibrate_store import (
     alphas_arg,
@@ -19,7 +20,6 @@ from pipelines.commands.calibrate_store import (
     take_back_killed,
     trained_on_notes,
 )
-from pipelines.commands.calibration_notes import sensor_range_refusal, wide_margins_notes
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError

@@ -68,6 +68,7 @@ def calibration_world_note(
     behind ``sensor_range`` m is read), the humans' motion its margins cover is that of the conventions it
     ran under, and a run under others planned with it silently. Not refused: an experiment may hold the
     margins fixed across conventions (conventions, docs/safe_crossing.md)."""
+    from predictors.calibration import remaking_view
     from predictors.calibration_store import recalibrate_command
     from predictors.conformal import alpha_text
 
@@ -86,14 +87,14 @@ def calibration_world_note(
     measured = (block.details.get("profile"), block.details.get("visibility"))
     if None in measured or measured == (profile, visibility):
         return None
+    view, why = remaking_view(block, (sensor_range, sensor_tracks))
     command = recalibrate_command(name, margins.source, margins.alpha, kind=_kind(entry))
-    command += _block_options(block)
+    command += _block_options(block, view)
     return (
         f"note: the closed-loop margins of {name!r} at alpha={alpha_text(margins.alpha)} were calibrated "
         f"under profile {measured[0]} with robots {measured[1]}, this run is {profile} with robots "
         f"{visibility}: their coverage here is not measured ({command} --profile {profile} --visibility "
-        f"{visibility} measures it, replacing that block for every run; CROWDMPC_ZOO=DIR keeps it "
-        "apart)"
+        f"{visibility} measures it{why or _REPLACING}; CROWDMPC_ZOO=DIR keeps it apart)"
     )
 
 
@@ -189,29 +190,39 @@ def calibration_controller_note(
     """A line for closed-loop margins calibrated with another controller than the run's (``calibrate
     --controller dmpc`` for a CMPC run), None otherwise (``controller_note``)."""
     block = _planned_block(spec.behind(sensor_range, sensor_tracks), as_read)
-    return None if block is None else controller_note(block, spec.controller, entry)
+    view = (sensor_range, sensor_tracks)
+    return None if block is None else controller_note(block, spec.controller, entry, view)
 
 
-def controller_note(block: Calibration, controller: str, entry: Entry = ...) -> str | None:
+def controller_note(
+    block: Calibration, controller: str, entry: Entry = ..., view: tuple[float | None, bool] = (None, True)
+) -> str | None:
     """A line for a run of MPC ``controller`` planning with the margins of ``block``, a closed-loop block
     calibrated with another controller (``calibrate --controller``, recorded in its details), None otherwise,
     as ``calibration_world_note`` says it of another profile: CMPC's and DMPC's robots move
     otherwise, and so do the humans who answer them, but one block is stored per alpha (a recalibration
     replaces it) and a run planned with the other controller's silently. Not refused: an experiment may hold
     the margins fixed across controllers. ``entry``: the predictor's zoo entry as the run located it, whose
-    model kind the quoted command registers (``...``: the command locates it)."""
+    model kind the quoted command registers (``...``: the command locates it). ``view``: the run's sensor
+    range and track lengths, the command's where calibrate refuses the block's (``remaking_view``)."""
+    from predictors.calibration import remaking_view
     from predictors.calibration_store import calibrate_command
     from predictors.conformal import alpha_text
 
     made = block.details.get("controller") if block.source == "closed-loop" else None
     if made is None or made == controller:
         return None
-    command = calibrate_command(block, kind=_kind(entry), controller=controller)
+    view, why = remaking_view(block, view)
+    command = calibrate_command(block, kind=_kind(entry), view=view, controller=controller)
     return (
         f"note: the closed-loop margins of {block.predictor!r} at alpha={alpha_text(block.alpha)} were "
         f"calibrated with controller {made}, this run's is {controller}: their coverage here is not measured "
-        f"({command} measures it, replacing that block for every run; CROWDMPC_ZOO=DIR keeps it apart)"
+        f"({command} measures it{why or _REPLACING}; CROWDMPC_ZOO=DIR keeps it apart)"
     )
+
+
+# where the quoted command makes the block planned with again (else ``beyond_remaking`` says what it makes)
+_REPLACING: Final[str] = ", replacing that block for every run"
 
 
 # What docs/replayed_crowds.md measured behind a 3 m sensor, by calibration source (social_lstm_eth and
@@ -254,9 +265,7 @@ def sensor_margins_note(
     command = ""
     if margins.source == "closed-loop":  # a real calibration has no sensor: recorded people, all in view
         own = "with every person in view" if sensor_range is None else "behind this run's sensor"
-        options = _block_options(block, sensor=False)
-        if sensor_range is not None:
-            options += f" --sensor-range {sensor_range:g}" + ("" if sensor_tracks else " --no-sensor-tracks")
+        options = _block_options(block, (sensor_range, sensor_tracks))
         recalibrate = recalibrate_command(name, margins.source, margins.alpha, kind=_kind(entry))
         command = f"; {recalibrate}{options} calibrates {own}, stored beside that block"
     if sensor_range is None:
@@ -284,30 +293,6 @@ def sensor_margins_note(
         'short track, and they cover less than calibrated (docs/replayed_crowds.md, "Behind a sensor": at '
         f"3 m, {_MEASURED_BEHIND[margins.source]}){command}"
     )
-
-
-def wide_margins_notes(blocks: Sequence[Calibration]) -> list[str]:
-    """calibrate's line for each block with margins past ``MAX_MARGIN`` (of ``conformal``, or of a class of
-    ``conformal-motion`` or ``conformal-shortfall``), naming the first horizon step that passes it: a run
-    planning with those margins at a horizon reaching that step refuses the block
-    (``MarginSpec._check_width``), which calibrate stored without a word, in the place of its key's block."""
-    from pipelines.loop.margins import MAX_MARGIN, class_tables
-    from predictors.conformal import alpha_text
-
-    notes = []
-    for block in blocks:
-        tables = {"conformal": [block.quantiles]}
-        tables |= {mode: list(table.quantiles) for mode, table in class_tables(block).items() if table}
-        for mode, rows in tables.items():
-            past = [k + 1 for k in range(block.horizon) if any(row[k] > MAX_MARGIN for row in rows)]
-            if past:
-                notes.append(
-                    f"note: alpha {alpha_text(block.alpha)}: the {mode} margins pass the {MAX_MARGIN:g} m "
-                    f"any plan in the paper's scene can keep from horizon step {past[0]} on "
-                    f"({max(max(row) for row in rows):.4g} m at the widest): runs planning with them at a "
-                    f"horizon of {past[0]} or more refuse this block"
-                )
-    return notes
 
 
 def _planned_block(spec: ControllerSpec, as_read: Planned = ...) -> Any:
@@ -345,10 +330,11 @@ def _kind(entry: Entry) -> str | None | EllipsisType:
     return ... if entry is ... else None if entry is None else entry.model
 
 
-def _block_options(block: Any, sensor: bool = True) -> str:
-    """``calibrate``'s options that made ``block`` but for its conventions: the command the note gives makes
-    the same calibration (its horizon, episodes, crowds, controller, seed, scoring range and, unless
-    ``sensor`` is False, sensor range) under the run's, not the defaults' (200 episodes, horizon 4, CMPC)."""
+def _block_options(block: Any, view: tuple[float | None, bool]) -> str:
+    """``calibrate``'s options that made ``block`` but for its conventions and sensor: the command the note
+    gives makes the same calibration (its horizon, episodes, crowds, controller, seed, scoring range) under
+    the run's, not the defaults' (200 episodes, horizon 4, CMPC), behind the sensor of ``view`` (range, None:
+    every human in view; track lengths given)."""
     details = block.details
     near = details.get("near", 3.0)
     options = [f"--horizon {len(block.quantiles)}"]
@@ -358,39 +344,6 @@ def _block_options(block: Any, sensor: bool = True) -> str:
     if isinstance(details.get("humans"), list):
         options.append("--humans " + ",".join(str(h) for h in details["humans"]))
     options.append(f"--near {'inf' if near is None else f'{near:g}'}")  # null: everyone scored
-    if sensor and block.sensor_range is not None:  # its robots behind a sensor
-        options.append(f"--sensor-range {block.sensor_range:g}")
-        if not block.sensor_tracks:
-            options.append("--no-sensor-tracks")
+    if view[0] is not None:  # its robots behind a sensor
+        options.append(f"--sensor-range {view[0]:g}" + ("" if view[1] else " --no-sensor-tracks"))
     return " " + " ".join(options)
-
-
-def sensor_range_refusal(predictor: str, sensor_range: float | None) -> str | None:
-    """calibrate's refusal of a --sensor-range beyond ``crowdsim.world.SENSOR_RANGE`` (None: within it, or
-    none given; no distance at all is ``ClosedLoopPlan``'s to refuse), naming the calibrations file that
-    holds blocks of ``predictor`` made behind it before the bound: the same calibrate again was refused in
-    the bound's words alone, as if none were stored, where they stay in force (a run behind the nearest
-    range plans with one)."""
-    from crowdsim.world import is_sensor_range, sensor_range_refused
-    from predictors.calibration_store import stored_calibrations
-    from predictors.errors import PredictorError
-
-    if sensor_range is None or not is_sensor_range(sensor_range):
-        return None
-    refused = sensor_range_refused(sensor_range)
-    if refused is None:
-        return None
-    try:
-        stored = stored_calibrations()
-    except (PredictorError, OSError):  # a file calibrate cannot read: the refusal as for any range
-        stored = []
-    made = [(path, b) for path, b in stored if b.predictor == predictor and b.sensor_range == sensor_range]
-    if not made:
-        return f"--sensor-range: {refused}"
-    files = ", ".join(sorted({str(path) for path, _ in made}))
-    alphas = ", ".join(f"{b.alpha:g}" for _, b in made)
-    return (
-        f"--sensor-range: {refused}; {files} holds {predictor}'s closed-loop margins behind a "
-        f"{sensor_range:g} m sensor (alpha {alphas}), made before that bound: they stay, as `crowdmpc zoo "
-        "calibrations` lists them"
-    )

@@ -138,6 +138,41 @@ def test_a_run_planning_with_a_block_made_with_another_controller_gets_a_note():
     assert controller_note(find_calibration("constant_velocity", "real", 0.1), "dmpc") is None
 
 
+def test_a_block_made_beyond_todays_sensor_bound_is_not_quoted_back_to_calibrate():
+    """A block made behind a 2000 m sensor before calibrate bounded the range (1 km) is still planned with
+    (by a run behind the nearest range); the notes quoted `--sensor-range 2000` for it, a command calibrate
+    now refuses. They quote the run's view, whose block is planned with before it, and say why."""
+    import shlex
+
+    from pipelines.cli import build_parser
+    from pipelines.commands.calibrate_checks import sensor_range_refusal
+    from pipelines.commands.calibration_notes import calibration_controller_note, calibration_world_note
+    from pipelines.loop.margins import parse_margins
+    from pipelines.loop.spec import ControllerSpec
+
+    shipped = find_calibration("constant_velocity", "closed-loop", 0.1)
+    old = dataclasses.replace(shipped, details={**shipped.details, "sensor_range": 2000.0})
+    why = (
+        "; the block was made behind a 2000 m sensor before calibrate bounded the range (the sensor range "
+        "must be at most 1000 m, got 2000.0) and cannot be made again: the command makes one of the view "
+        "asked for, planned with before it; CROWDMPC_ZOO=DIR keeps it apart)"
+    )
+    spec = ControllerSpec("dmpc", "constant_velocity", margins=parse_margins("conformal:0.1"))
+    notes = [
+        calibration_controller_note(spec, 900, as_read=old),
+        calibration_world_note(spec, "v1", "visible", "orca", 900, as_read=old),
+    ]
+    for note in notes:
+        assert note is not None and "--sensor-range 2000" not in note and note.endswith(why)
+        command = note[note.index("(crowdmpc ") + 1 : note.index(" measures it")]
+        args = build_parser().parse_args(shlex.split(command)[1:])
+        assert args.sensor_range == 900 and sensor_range_refusal(args.predictor, args.sensor_range) is None
+    assert (controller_note(old, "dmpc", view=(3.0, False)) or "").endswith(
+        f"--near 3 --sensor-range 3 --no-sensor-tracks measures it{why}"
+    )
+    assert (controller_note(old, "dmpc") or "").endswith(f"--near 3 measures it{why}")  # every human seen
+
+
 # -------------------------------------------------------------------- 2c: zoo calibrations, the episodes
 def test_zoo_calibrations_shows_each_blocks_controller_and_episodes():
     header, *rows = calibration_table(None, "constant_velocity")
