@@ -119,8 +119,9 @@ def sensor_range_beyond(value: float) -> str | None:
 
 def sensor_range_refused(value: float) -> str | None:
     """``sensor_range_beyond`` naming what it bounds, "the sensor range must be at most 1000 m, got 2000.0":
-    the one wording of sweep's and calibrate's refusals after the option's name ("--sensor-range: ..."), which
-    had calibrate say "--sensor-range must be at most ..." where a sweep said the line above."""
+    the one wording of simulate's, sweep's and calibrate's refusals after the option's name ("--sensor-range:
+    ..."), which had calibrate say "--sensor-range must be at most ..." and simulate "--sensor-range: must be
+    at most ..." where a sweep said the line above."""
     beyond = sensor_range_beyond(value)
     return None if beyond is None else f"the sensor range {beyond}"
 

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from crowdsim.orca import neighbor_dist_beyond
-from crowdsim.world import sensor_range_beyond
+from crowdsim.world import sensor_range_refused
 from pipelines.commands.idle_choices import (
     SAMPLING_KEYS,
     shown_choice,
@@ -105,9 +105,9 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> PredictorRea
             "--sensor-range M too (or [simulate] sensor_range)"
         )
     sensed = config.simulate.sensor_range
-    beyond = None if sensed is None else sensor_range_beyond(sensed)
-    if beyond is not None:  # here, not by SimulateSettings: a sweep folder that ran one reads back
-        raise config.error("simulate", "sensor_range", beyond)
+    refused = None if sensed is None else sensor_range_refused(sensed)  # sweep's and calibrate's words
+    if refused is not None:  # here, not by SimulateSettings: a sweep folder that ran one reads back
+        raise config.error("simulate", "sensor_range", refused)
     beyond = neighbor_dist_beyond(config.env.orca)
     if beyond is not None:  # and not by OrcaParams
         raise config.error("env.orca", "neighbor_dist", beyond)

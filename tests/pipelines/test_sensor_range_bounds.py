@@ -20,12 +20,15 @@ SIMULATE = ["simulate", "--controller", "straight", "--episodes", "1", "--humans
 @pytest.mark.parametrize(
     "given, said",
     [
-        (["--sensor-range", "5e-324"], "--sensor-range: must be at least 1e-06 m, got 5e-324"),
-        (["--sensor-range", "1e300"], "--sensor-range: must be at most 1000 m, got 1e+300"),
-        (["--sensor-range", "1000.5"], "--sensor-range: must be at most 1000 m, got 1000.5"),
+        (
+            ["--sensor-range", "5e-324"],
+            "--sensor-range: the sensor range must be at least 1e-06 m, got 5e-324",
+        ),
+        (["--sensor-range", "1e300"], "--sensor-range: the sensor range must be at most 1000 m, got 1e+300"),
+        (["--sensor-range", "1000.5"], "--sensor-range: the sensor range must be at most 1000 m, got 1000.5"),
         (
             ["--set", "simulate.sensor_range=1e-12"],
-            "--set simulate.sensor_range: must be at least 1e-06 m, got 1e-12",
+            "--set simulate.sensor_range: the sensor range must be at least 1e-06 m, got 1e-12",
         ),
     ],
 )
@@ -86,15 +89,20 @@ def test_a_calibration_behind_a_sensor_is_refused_them_as_it_is_planned():
     assert ClosedLoopPlan("constant_velocity", sensor_range=1000.0).sensor_range == 1000.0
 
 
-def test_calibrate_refuses_them_in_a_sweeps_words(capsys, tmp_path):
-    """calibrate said "--sensor-range must be at most 1000 m, got 2000.0" where a sweep says "--sensor-range:
-    the sensor range must be at most ...": both now take crowdsim.world.sensor_range_refused's words."""
+def test_simulate_and_calibrate_refuse_them_in_a_sweeps_words(capsys, tmp_path):
+    """calibrate said "--sensor-range must be at most 1000 m, got 2000.0" and simulate "--sensor-range: must
+    be at most 1000 m, ..." where a sweep says "--sensor-range: the sensor range must be at most ...": all
+    three now take crowdsim.world.sensor_range_refused's words. Other settings' refusals read as before."""
     calibrate = ["calibrate", "--predictor", "constant_velocity", "--source", "closed-loop", "--no-progress"]
     sweep = ["sweep", "--experiment", "baselines", "--humans", "1", "--episodes-per-cell", "1", "--dry-run"]
     sweep += ["--out", str(tmp_path / "sweep")]
     said = {}
-    for command, extra in ((calibrate, ["--dry-run"]), (calibrate, []), (sweep, [])):
+    for command, extra in ((calibrate, ["--dry-run"]), (calibrate, []), (sweep, []), (SIMULATE, [])):
         code, _, err = run(capsys, *command, *extra, "--sensor-range", "2000")
         assert code == 2
         said[(command[0], *extra)] = one_line(err).split(": error: ", 1)[1]
     assert set(said.values()) == {"--sensor-range: the sensor range must be at most 1000 m, got 2000.0"}
+    code, _, err = run(capsys, *SIMULATE, "--set", "env.orca.neighbor_dist=1e-9")
+    assert code == 2 and one_line(err).startswith(
+        "crowdmpc simulate: error: --set env.orca.neighbor_dist: must be at least"
+    )
