@@ -221,10 +221,12 @@ def check_contact_distance(world: WorldFacts, cfg: MPCConfig, radius_settable: b
     of their radii that distance is a contact, which the MPC then accepts in its plans (``--set
     mpc.d_min=0.5``, 9 humans, seeds 0-5: within 0.8 m of a human in 6 of 6 episodes, in contact in 1). A
     d_min equal to ``2 radius`` is allowed: agents that touch without overlapping. ``radius_settable``: the
-    run may change [world] radius (a sweep may not), so the message offers it, unless it is already the
-    world's least (crowdsim.world.LEAST), where a smaller one is refused."""
+    run may change [world] radius (a sweep may not), so the message offers it, unless the radius d_min
+    needs (d_min / 2) is below the world's least (crowdsim.world.LEAST), which is refused: the offer stood
+    at radius 2e-06 for d_min 1e-07, and at the default 0.3 for d_min 1e-09."""
     contact = 2.0 * world.radius
-    smaller = radius_settable and world.radius > LEAST["radius"][0]
+    # the least radius itself passes the check below, as a smaller one would for this d_min
+    smaller = radius_settable and cfg.d_min >= 2.0 * LEAST["radius"][0] - 1e-12
     if cfg.d_min < contact - 1e-12:
         raise PipelineError(
             f"the MPC's d_min {cfg.d_min:g} m is below the contact distance 2 x [world] radius = "

@@ -116,19 +116,29 @@ def test_make_controller_refuses_an_mpc_whose_d_min_is_below_the_contact_distanc
         make_controller(spec, EnvConfig(radius=0.55))
 
 
-def test_the_refusal_offers_a_smaller_radius_only_above_the_least(capsys):
+@pytest.mark.parametrize(
+    ("radius", "d_min", "advice"),
+    [
+        ("1e-6", "1e-7", ""),  # at the least radius
+        ("2e-6", "1e-7", ""),  # above it, but d_min needs a radius of 5e-08 m, below the least
+        ("0.3", "1e-9", ""),
+        ("2e-6", "2e-6", ", or a smaller [world] radius"),  # the least radius, 1e-06 m, would do
+        ("0.3", "0.5", ", or a smaller [world] radius"),
+    ],
+)
+def test_the_refusal_offers_a_smaller_radius_only_where_one_is_allowed(capsys, radius, d_min, advice):
     """At [world] radius 1e-06 m, crowdsim.world's least, `--set mpc.d_min=1e-7` was told "or a smaller
-    [world] radius", which is refused; above it the advice stays."""
+    [world] radius", which is refused; so was it above the least where the radius d_min needs (d_min / 2)
+    is below it (`--set world.radius=2e-6 --set mpc.d_min=1e-7`: 5e-08 m "must be at least 1e-06 m")."""
     argv = ["simulate", "--controller", "cmpc", "--humans", "1", "--robots", "1", "--no-progress"]
-    for radius, advice in (("1e-6", ""), ("2e-6", ", or a smaller [world] radius")):
-        assert main([*argv, "--set", f"world.radius={radius}", "--set", "mpc.d_min=1e-7"]) == 2
-        contact = f"{2 * float(radius):g}"
-        assert capsys.readouterr().err.strip() == (
-            "crowdmpc simulate: error: --set mpc.d_min: the MPC's d_min 1e-07 m is below the contact "
-            f"distance 2 x [world] radius = {contact} m: its plans would touch humans and teammates (Eqs. 11 "
-            f"and 12 keep d_min between centres); set [mpc] d_min >= {contact} (--set mpc.d_min={contact})"
-            f"{advice}"
-        )
+    assert main([*argv, "--set", f"world.radius={radius}", "--set", f"mpc.d_min={d_min}"]) == 2
+    contact = f"{2 * float(radius):g}"
+    assert capsys.readouterr().err.strip() == (
+        f"crowdmpc simulate: error: --set mpc.d_min: the MPC's d_min {float(d_min):g} m is below the contact "
+        f"distance 2 x [world] radius = {contact} m: its plans would touch humans and teammates (Eqs. 11 "
+        f"and 12 keep d_min between centres); set [mpc] d_min >= {contact} (--set mpc.d_min={contact})"
+        f"{advice}"
+    )
 
 
 def test_config_show_says_what_d_min_must_be_and_what_the_collision_rate_counts(capsys):
