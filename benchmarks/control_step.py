@@ -32,6 +32,7 @@ import numpy as np
 from crowdsim.env import CrowdEnv
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.mpc import MPCController
+from predictors.text_table import counted
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
@@ -119,40 +120,40 @@ def main(argv: list[str] | None = None) -> int:
             parser.error("--dmpc-parallel runs at 7 humans: add 7 to --humans")
 
         report: dict[str, Any] = {"load_before": os.getloadavg()}
-        rows: list[tuple[str, dict[str, Any]]] = []
+        rows: list[tuple[str, int, dict[str, Any]]] = []  # (kind, padded as printed; humans; row)
         for n in args.humans:
             if not args.no_ibr:
                 cmpc = closed_loop(ControllerSpec("cmpc", args.predictor), n, args.episodes, floor=True)
                 # the ratio of the two medians (not a median of per-step ratios), printed under the
                 # floor's row
                 cmpc["median_over_floor_median"] = cmpc["median_ms"] / cmpc["floor"]["median_ms"]
-                rows.append((f"cmpc      {n} humans", cmpc))
-                rows.append((f"floor     {n} humans", cmpc["floor"]))
+                rows.append(("cmpc     ", n, cmpc))
+                rows.append(("floor    ", n, cmpc["floor"]))
                 rows.append(
-                    (
-                        f"dmpc      {n} humans",
-                        closed_loop(ControllerSpec("dmpc", args.predictor), n, args.episodes),
-                    )
+                    ("dmpc     ", n, closed_loop(ControllerSpec("dmpc", args.predictor), n, args.episodes))
                 )
             if args.dmpc_parallel and n == 7:
                 for mode in ("serial", "threads"):
                     spec = ControllerSpec("dmpc", args.predictor, mpc_overrides=(("dmpc_parallel", mode),))
-                    rows.append((f"dmpc {mode:<7} {n} humans", closed_loop(spec, n, args.episodes)))
+                    rows.append((f"dmpc {mode:<7}", n, closed_loop(spec, n, args.episodes)))
             if args.coupled:
                 for mode in ("exact", "first_order"):
                     spec = ControllerSpec(
                         "cmpc", args.predictor, coupling="nlp", mpc_overrides=(("coupled_mode", mode),)
                     )
-                    rows.append((f"nlp {mode:<11} {n} humans", closed_loop(spec, n, args.episodes)))
+                    rows.append((f"nlp {mode:<11}", n, closed_loop(spec, n, args.episodes)))
         report["load_after"] = os.getloadavg()
         report["predictor"] = args.predictor
-        report["rows"] = dict(rows)
+        # the JSON's keys say "N humans" whatever N, as docs/outputs.md documents them; the table counts
+        report["rows"] = {f"{kind} {n} humans": row for kind, n, row in rows}
 
-        print(f"predictor {args.predictor}, 3 robots, circle crossing, {args.episodes} episodes per row")
+        episodes = counted(args.episodes, "episode")
+        print(f"predictor {args.predictor}, 3 robots, circle crossing, {episodes} per row")
         print(f"load average before {report['load_before'][0]:.2f}, after {report['load_after'][0]:.2f}")
         print(f"{'row':<30} {'median ms':>10} {'p95 ms':>10} {'steps':>6} {'IBR its':>8} {'solves':>7}")
         cmpc_row: dict[str, Any] = {}
-        for label, row in rows:
+        for kind, n, row in rows:
+            label = f"{kind} {counted(n, 'human')}"
             its = f"{row['iterations_mean']:8.2f}" if "iterations_mean" in row else " " * 8
             sol = f"{row['solves_mean']:7.2f}" if "solves_mean" in row else " " * 7
             print(f"{label:<30} {row['median_ms']:10.2f} {row['p95_ms']:10.2f} {row['steps']:6d} {its} {sol}")

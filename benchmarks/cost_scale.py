@@ -28,6 +28,7 @@ from mpc import solvers
 from pipelines.config import RunConfig, load
 from pipelines.errors import PipelineError
 from pipelines.loop.margins import parse_margins
+from predictors.text_table import counted
 
 # robot_scaling.py, the episodes' runner, is imported by name however this is run.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -122,7 +123,8 @@ def main(argv: list[str] | None = None) -> int:
             for scale in args.cost_scale
         ]
         print(
-            f"CMPC, {args.predictor}, {args.humans} humans, {args.episodes} episodes a row, config "
+            f"CMPC, {args.predictor}, {counted(args.humans, 'human')}, "
+            f"{counted(args.episodes, 'episode')} a row, config "
             f"{args.config or 'none (the paper)'}; load {load_before:.2f} -> {os.getloadavg()[0]:.2f}, "
             f"{time.perf_counter() - t0:.0f} s"
         )

@@ -6,13 +6,16 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from predictors.text_table import counted
+
 
 def print_report(
     report: dict[str, Any], args: argparse.Namespace, predictor: str, extra: tuple[tuple[str, Any], ...]
 ) -> None:
     """The table of ``report`` (one row per cell and mode, a speed-up line under each threaded cell)."""
     print(
-        f"DMPC, {predictor}, circle crossing, {args.humans} humans, {args.episodes} episodes per row, "
+        f"DMPC, {predictor}, circle crossing, {counted(args.humans, 'human')}, "
+        f"{counted(args.episodes, 'episode')} per row, "
         f"{report['cpus']} CPUs" + "".join(f", {k}={v}" for k, v in extra)
     )
     print(

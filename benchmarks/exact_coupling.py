@@ -35,6 +35,7 @@ from mpc.coupled import CoupledCMPC
 from mpc.solvers import SOLVED
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.mpc import MPCController
+from predictors.text_table import counted
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
@@ -136,7 +137,8 @@ def main(argv: list[str] | None = None) -> int:
         row = measure(args.predictor, args.humans, args.episodes, args.max_iter)
         row["load_before"], row["load_after"] = load, os.getloadavg()[0]
         print(
-            f"{row['predictor']}, {row['humans']} humans, {row['episodes']} episodes of first-order coupling "
+            f"{row['predictor']}, {counted(row['humans'], 'human')}, "
+            f"{counted(row['episodes'], 'episode')} of first-order coupling "
             f"(success {row['first_order_success_rate']:.0f} %, "
             f"collision {row['first_order_collision_rate']:.0f} %), "
             f"load {row['load_before']:.2f} -> {row['load_after']:.2f}"
@@ -150,9 +152,9 @@ def main(argv: list[str] | None = None) -> int:
         # No step, or no exact solve that succeeded, leaves a figure unmeasured (NaN): said in words, not
         # "nan".
         if row["steps"]:
-            counted = ITERATIONS[row["exact_solver"]]
+            iterated = ITERATIONS[row["exact_solver"]]
             print(
-                f"  {counted} iterations median {row['exact_iterations_median']:.1f}, p90 "
+                f"  {iterated} iterations median {row['exact_iterations_median']:.1f}, p90 "
                 f"{row['exact_iterations_p90']:.1f}; time median {row['exact_ms_median']:.0f} ms, p95 "
                 f"{row['exact_ms_p95']:.0f} ms"
             )

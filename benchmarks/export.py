@@ -34,6 +34,7 @@ from pipelines.loop.mpc import MPCController  # noqa: E402
 from predictors.export.parity import check_parity, crossing_scene  # noqa: E402
 from predictors.learned import LearnedPredictor  # noqa: E402
 from predictors.registry import load_predictor  # noqa: E402
+from predictors.text_table import counted  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import count_in, figure, predicted_humans, run_main  # noqa: E402
@@ -158,7 +159,9 @@ def main() -> None:
         )
     entries, kinds = read_manifest(), set(model_names())
     load = os.getloadavg()[0]
-    print(f"load average {load:.2f} on {os.cpu_count()} cores; {args.humans} humans, 3 robots, H=4")
+    print(
+        f"load average {load:.2f} on {os.cpu_count()} cores; {counted(args.humans, 'human')}, 3 robots, H=4"
+    )
     columns = ("export s", "value err", "jac err", "IBR ms", "NLP ms")
     widths = (9, 10, 10, 8, 8)
     print(f"{'model':22} {'twin':13} " + " ".join(f"{c:>{w}}" for c, w in zip(columns, widths, strict=True)))

@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from predictors.text_table import counted
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
     episode_count,
@@ -123,7 +125,8 @@ def _measure(args: argparse.Namespace) -> None:
         "modes": {},
     }
     print(
-        f"CMPC, {args.predictor}, {args.humans} humans, {args.scenario}, {args.profile}, seeds {args.seed}.."
+        f"CMPC, {args.predictor}, {counted(args.humans, 'human')}, {args.scenario}, {args.profile}, "
+        f"seeds {args.seed}.."
         f"{args.seed + args.episodes - 1}: success / collision / contact %, travel s; first step elsewhere"
     )
     for mode, results in runs.items():

@@ -28,6 +28,7 @@ import numpy as np
 from crowdsim.env import CrowdEnv
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.mpc import MPCController
+from predictors.text_table import counted
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import episode_count, human_count, predictor_name, private_cache, run_main  # noqa: E402
@@ -126,7 +127,8 @@ def main(argv: list[str] | None = None) -> int:
     load = os.getloadavg()[0]
     with private_cache("crowdmpc-ibr-cache-"):  # the compile is not timed; it must not fill the user's cache
         row = measure(args.predictor, args.humans, args.episodes, args.jit)
-    setting = f"{args.predictor}, {args.humans} humans, {args.episodes} episodes, jit {args.jit}"
+    humans, episodes = counted(args.humans, "human"), counted(args.episodes, "episode")
+    setting = f"{args.predictor}, {humans}, {episodes}, jit {args.jit}"
     print(f"{setting}, load {load:.2f}")
     print(
         f"step {row['step_ms']:.2f} ms median: first solve {row['first_solve_ms']:.2f}, later solves "

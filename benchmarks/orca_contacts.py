@@ -18,6 +18,7 @@ import numpy as np
 
 from crowdsim.baselines import OrcaController
 from crowdsim.env import CrowdEnv
+from predictors.text_table import counted
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import episode_bar, episode_count, human_count, robot_count, run_main, seed_number  # noqa: E402
@@ -72,14 +73,16 @@ def main() -> None:
         contact_without_lp3 += bool(len(rows)) and not any(lp3[r] for r in rows)
 
     n = args.episodes
-    print(f"{n} episodes, {args.scenario} crossing, {args.humans} humans, {m} ORCA robots, seeds "
+    episodes = counted(n, "episode")
+    print(f"{episodes}, {args.scenario} crossing, {counted(args.humans, 'human')}, "
+          f"{counted(m, 'ORCA robot')}, seeds "
           f"{args.seed}..{args.seed + n - 1}")  # fmt: skip
     for name, values in minima.items():
         v = np.array(values)
         if not np.isfinite(v).any():  # one robot: no robot-robot pair (it printed "inf m")
             print(f"  {name:<12} no pair of this kind")
             continue
-        print(f"  {name:<12} contact (< {CONTACT} m) in {int((v < CONTACT).sum()):>3} / {n} episodes;"
+        print(f"  {name:<12} contact (< {CONTACT} m) in {int((v < CONTACT).sum()):>3} / {episodes};"
               f" smallest distance {v.min():.3f} m")  # fmt: skip
     print(f"  episodes where some human needed the 3-D linear program: {lp3_episodes} / {n}")
     print(f"  episodes with a contact at a step where no human needed the 3-D program: {contact_without_lp3}")

@@ -25,6 +25,7 @@ from crowdsim.baselines import OrcaController
 from crowdsim.env import CrowdEnv
 from crowdsim.env_config import EnvConfig
 from crowdsim.orca import orca_velocities, preferred_velocities
+from predictors.text_table import counted
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import check_distinct, count_in, episode_count, human_count, robot_count, run_main  # noqa: E402
@@ -93,7 +94,8 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     check_distinct(parser, "--humans", args.humans)  # a repeat ran its row twice
     print(
-        f"CrowdEnv.step, {args.scenario} crossing, {args.robots} ORCA robots, {args.episodes} episodes a size"
+        f"CrowdEnv.step, {args.scenario} crossing, {counted(args.robots, 'ORCA robot')}, "
+        f"{counted(args.episodes, 'episode')} a size"
     )
     print(f"{'humans':>6} {'agents':>6} {'steps':>6} {'median ms':>10} {'p95 ms':>8} {'mean ms':>8} "
           f"{'ORCA only ms':>13} {'3-D LP steps':>13}")  # fmt: skip

@@ -38,6 +38,7 @@ from pipelines.errors import PipelineError  # noqa: E402
 from predictors.export.parity import crossing_scene  # noqa: E402
 from predictors.learned import LearnedPredictor  # noqa: E402
 from predictors.registry import load_predictor  # noqa: E402
+from predictors.text_table import counted  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import count_in, figure, predicted_humans, robot_count, run_main  # noqa: E402
@@ -115,7 +116,8 @@ def main(argv: list[str] | None = None) -> int:
     if not isinstance(predictor, LearnedPredictor):  # a user error: one line and exit 2, as crowdmpc's
         parser.error(f"--model {args.model} is not a learned predictor: it has no CasADi encoder or twin")
     print(
-        f"{args.model}, {args.humans} humans + {args.robots} robots, H = {args.horizon}, "
+        f"{args.model}, {counted(args.humans, 'human')} + {counted(args.robots, 'robot')}, "
+        f"H = {args.horizon}, "
         f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores"
     )
     to_compile = {"none": (), "twin": ("twin",), "encoder": ("encoder",), "both": ("encoder", "twin")}

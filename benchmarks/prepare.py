@@ -22,6 +22,8 @@ import sys
 import time
 from pathlib import Path
 
+from predictors.text_table import counted
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
     human_count,
@@ -88,7 +90,10 @@ def main() -> None:
     args = parser.parse_args()
     humans = list(dict.fromkeys(args.humans))  # each size once, in the order given
     with json_on_stdout(args.json):
-        print(f"{args.controller}, {args.predictor}, {args.robots} robots, jit {'on' if args.jit else 'off'}")
+        print(
+            f"{args.controller}, {args.predictor}, {counted(args.robots, 'robot')}, "
+            f"jit {'on' if args.jit else 'off'}"
+        )
         runs = {}
         if not args.jit:
             runs["no_jit"] = prepare_once(args.controller, args.predictor, args.robots, humans, False)

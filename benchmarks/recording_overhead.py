@@ -19,6 +19,7 @@ from pathlib import Path
 from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode
+from predictors.text_table import counted
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import episode_count, human_count, predictor_name, run_main  # noqa: E402
@@ -80,7 +81,7 @@ def main() -> None:
     args = parser.parse_args()
     row = measure(args.controller, args.predictor, args.episodes, args.humans)
     print(
-        f"{row['controller']} ({row['predictor'] or 'no predictor'}), {row['episodes']} episodes, "
+        f"{row['controller']} ({row['predictor'] or 'no predictor'}), {counted(row['episodes'], 'episode')}, "
         f"{row['steps']} steps: "
         f"loop {row['loop_s']:.2f} s, recording {row['recording_s']:.3f} s "
         f"({row['recording_ms_per_step']:.2f} ms/step) = {row['overhead_percent']:.1f} % of the loop"

@@ -29,6 +29,7 @@ from crowdsim.replay import REACTIVE, REPLAYED, recorded
 from crowdsim.scenarios import MAX_HUMANS
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.episode import EpisodeResult, run_episodes
+from predictors.text_table import counted
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import count_in, episode_count, predictor_name, run_main, seed_number  # noqa: E402
@@ -88,8 +89,8 @@ def main() -> None:
     parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
     args = parser.parse_args()
     config = EnvConfig(crowd=args.crowd)
-    people = f"{args.humans} people of {args.crowd}"
-    print(f"CMPC with {args.predictor} among {people}, {args.episodes} episodes each")
+    people = f"{args.humans} {'person' if args.humans == 1 else 'people'} of {args.crowd}"
+    print(f"CMPC with {args.predictor} among {people}, {counted(args.episodes, 'episode')} each")
     for scenario in ("circle", "perpendicular"):
         spec = ControllerSpec("cmpc", args.predictor)
         results = run_episodes(
@@ -105,12 +106,12 @@ def main() -> None:
             pushed = np.array([deflection(r, p) for r, p in zip(results, plain, strict=True)])
             print(
                 f"{scenario:13s} people pushed off their tracks: by more than 0.1 m in "
-                f"{int((pushed > 0.1).sum())} of {len(pushed)} episodes; the farthest, median "
+                f"{int((pushed > 0.1).sum())} of {counted(len(pushed), 'episode')}; the farthest, median "
                 f"{np.median(pushed):.2f} m, "
                 f"largest {pushed.max():.2f} m"
             )
         rows = np.array([c for c in map(contact_at, results) if c is not None]).reshape(-1, 5)
-        line = f"{scenario:13s} contact in {len(rows)} of {len(results)} episodes"
+        line = f"{scenario:13s} contact in {len(rows)} of {counted(len(results), 'episode')}"
         if len(rows):
             _, robot, start, goal, _ = np.median(rows, axis=0)
             speeds = rows[np.isfinite(rows[:, 0]), 0]  # those tracked the step before

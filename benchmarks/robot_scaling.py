@@ -62,6 +62,7 @@ from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.margins import MarginSpec, parse_margins
 from pipelines.loop.mpc import MPCController
+from predictors.text_table import counted
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
@@ -311,7 +312,8 @@ def main(argv: list[str] | None = None) -> int:
         report["rows"] = rows
 
         print(
-            f"predictor {args.predictor}, {args.humans} humans, {args.episodes} episodes per row "
+            f"predictor {args.predictor}, {counted(args.humans, 'human')}, "
+            f"{counted(args.episodes, 'episode')} per row "
             f"({'/'.join(args.scenarios)}), formation {formation}, goals {goals}, margins {margins.label}"
             + "".join(f", {k}={v}" for k, v in overrides)
         )

@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from predictors.text_table import counted
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
     check_distinct,
@@ -125,7 +127,7 @@ def main() -> None:
         controller.prepare(3, range(args.humans + 1))  # type: ignore[attr-defined]  # every crowd in view
         print(f"{args.controller}, {args.predictor}, margins {margins.label}"
               + "".join(f", {k}={v}" for k, v in spec.mpc_overrides)
-              + f", {args.humans} humans, {args.episodes} episodes a row")  # fmt: skip
+              + f", {counted(args.humans, 'human')}, {counted(args.episodes, 'episode')} a row")  # fmt: skip
         rows = [run_row(controller, "full observation", args.episodes, args.seed, args.humans)]
         for r in args.radii:
             for report in (True, False):

@@ -29,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mpc import nlp as nlp_module  # noqa: E402
 from mpc.config import MPCConfig  # noqa: E402
+from predictors.text_table import counted  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
@@ -142,7 +143,8 @@ def main(argv: list[str] | None = None) -> int:
     # --json -: the JSON alone on stdout, the rest on stderr
     with json_on_stdout(args.json), private_cache("solvers-bench-"):
         print(
-            f"recording {args.episodes} DMPC + {args.episodes} CMPC episodes, {args.humans} humans",
+            f"recording {args.episodes} DMPC + {args.episodes} CMPC episodes, "
+            f"{counted(args.humans, 'human')}",
             file=sys.stderr,
         )
         problems = record_problems(args.humans, args.episodes, args.predictor)

@@ -70,9 +70,9 @@ def run_main(monkeypatch, capsys, crowd: str) -> list[str]:
 
 def test_it_runs_and_reports_each_scenario(monkeypatch, capsys):
     out = run_main(monkeypatch, capsys, "eth_test")
-    assert out[0] == "CMPC with constant_velocity among 3 people of eth_test, 1 episodes each"
+    assert out[0] == "CMPC with constant_velocity among 3 people of eth_test, 1 episode each"
     assert [line.split()[0] for line in out[1:]] == ["circle", "perpendicular"]
-    assert all(" of 1 episodes" in line for line in out[1:])
+    assert all(" of 1 episode" in line and " of 1 episodes" not in line for line in out[1:])
 
 
 def test_how_far_people_were_pushed_counts_tracked_people_over_the_steps_both_ran():
