@@ -239,9 +239,10 @@ def beyond_remaking(block: Calibration) -> str:
 def remaking_view(
     block: Calibration, wanted: tuple[float | None, bool]
 ) -> tuple[tuple[float | None, bool], str]:
-    """The view (sensor range, track lengths given) of the command a note quotes to make ``block`` again, and
-    ``beyond_remaking``'s why: the block's own, or ``wanted`` (the run's) where calibrate refuses the block's
-    range, as the notes quoted ``--sensor-range 2000`` for a block made before the bound."""
+    """The view (sensor range, track lengths given) of the command a note or refusal quotes to make ``block``
+    again, and ``beyond_remaking``'s why ("" where the block's own view's command makes it again): the
+    block's own, or ``wanted`` (the run's) where calibrate refuses the block's range, as the notes quoted
+    ``--sensor-range 2000`` for a block made before the bound."""
     why = beyond_remaking(block)
     return (wanted if why else (block.sensor_range, block.sensor_tracks)), why
 

@@ -20,7 +20,7 @@ from pathlib import Path
 from types import EllipsisType
 from typing import Final
 
-from predictors.calibration import SOURCES, Calibration, beyond_remaking
+from predictors.calibration import SOURCES, Calibration, remaking_view
 from predictors.checkpoint import read_document
 from predictors.conformal import alpha_text, check_alpha
 from predictors.durable import write_text_durably
@@ -358,8 +358,7 @@ def locate_calibration(
     path, block = min(found, key=lambda found: view_distance(found[1].key()[3:], wanted))
     expected = current_sha256(predictor, directory) if sha256 is ... else sha256
     if block.predictor_sha256 != expected:
-        why = beyond_remaking(block)  # "": the block's own view's command makes it again
-        view = wanted if why else block.key()[3:]
+        view, why = remaking_view(block, wanted)
         command = recalibrate_command(predictor, source, alpha, *view, kind=kind)
         behind = _behind(block.sensor_range, block.sensor_tracks)
         raise PredictorError(

@@ -179,13 +179,12 @@ class MarginSpec:
         block = (at or self._located(predictor, horizon, sha256))[1]
         table = class_tables(block)[self.mode]
         if table is None:
-            from predictors.calibration import beyond_remaking
+            from predictors.calibration import remaking_view
             from predictors.calibration_store import recalibrate_command
             from predictors.conformal import alpha_text
 
             assert predictor is not None  # _block refused None
-            why = beyond_remaking(block)  # "": the block's own view's command makes it again
-            view = (self.sensor_range, self.sensor_tracks) if why else block.key()[3:]
+            view, why = remaking_view(block, (self.sensor_range, self.sensor_tracks))
             command = recalibrate_command(predictor, self.source, self.alpha, *view)
             raise PipelineError(
                 f"the {self.source} calibration of {predictor!r} at alpha={alpha_text(self.alpha)} has no "
