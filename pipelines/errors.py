@@ -32,7 +32,12 @@ class RecordingRefused(PipelineError):
 
 class SweepStopped(PipelineError):
     """A sweep that stopped itself part way (its first episodes all raised, its workers kept dying): what it
-    recorded stands, and gets its report."""
+    recorded stands, and gets its report. ``workers``: the episodes its backend ran at once (None: none
+    started, or it did not say), which the report's CPU projection divides by."""
+
+    def __init__(self, message: str, workers: int | None = None):
+        super().__init__(message)
+        self.workers = workers
 
 
 class EpisodeFailed(PipelineError):

@@ -115,8 +115,8 @@ def run(args: argparse.Namespace) -> int:
         try:
             # the workers load the weights checked, and their blocks
             status, workers = run_cells(config, log, models)
-        except SweepStopped:
-            report_stopped(config, cells, tasks, log)  # what it recorded stands
+        except SweepStopped as stopped:
+            report_stopped(config, cells, tasks, log, stopped.workers)  # what it recorded stands
             raise
         if status == INTERRUPTED:  # a record appended as the interrupt came may not have reached ``log``
             log = None

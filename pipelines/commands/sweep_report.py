@@ -128,13 +128,18 @@ def _note_unrun_cells(cells: tuple[Cell, ...], recorded: set[str]) -> None:
 
 
 def report_stopped(
-    config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask], log: LogRead | None = None
+    config: SweepConfig,
+    cells: tuple[Cell, ...],
+    tasks: list[EpisodeTask],
+    log: LogRead | None = None,
+    workers: int | None = None,
 ) -> None:
     """The report of a sweep that stopped itself part way (SweepStopped): what it recorded stands. None when
-    the plan has no record yet (a sweep stopped before its first). ``log``: as ``report``'s."""
+    the plan has no record yet (a sweep stopped before its first). ``log``, ``workers``: as ``report``'s (the
+    stop's ``workers``: a Ray cluster's stop projected for the --workers asked, not the actors that fit)."""
     log = read_log(config, cells, tasks) if log is None else log
     if log.planned:
-        _write(config, cells, tasks, log)
+        _write(config, cells, tasks, log, workers)
 
 
 def _write(

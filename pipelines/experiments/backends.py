@@ -32,6 +32,8 @@ from pipelines.experiments.process_backend import CLOSE_GRACE_S, MAX_BREAKS_IN_A
 from pipelines.experiments.ray_join import (
     RAY_ADDRESS_ENV,
     address_from_environment,
+    answers,
+    gcs_endpoint,
     join_cluster,
     joining_from_environment,
     stopped_answering,
@@ -177,13 +179,14 @@ class RayBackend:
                     signal.signal(signal.SIGTERM, terminate)
         self.workers = workers  # on a cluster, those that fit its free CPUs
         self._local = self._owns_ray and address is None  # a Ray of its own: no cluster to wait for
-        self._gcs = _gcs_endpoint(ray, address)
+        self._gcs = gcs_endpoint(ray, address)
         self._actor_class: Any = ray.remote(num_cpus=1)(_RayEpisodeWorker)
         self._actor_args = (record, jit, scratch_root, timeout_s)
         self._actors: list[Any] = [self._actor_class.remote(*self._actor_args) for _ in range(workers)]
         self._uncommitted_nodes: set[str] = set()  # compared without a commit: said once a node
         self._gcs_gone = False
         self._drained = False
+        self._owner: dict[Any, tuple[int, Any, EpisodeTask]] = {}  # run's: object ref -> (slot, actor, task)
         try:
             self._check_code(self._actors)
         except BaseException:
@@ -232,7 +235,7 @@ class RayBackend:
         ray = self._ray
         self._drained = False  # until this run's episodes have all come back
         pending = iter(tasks)
-        owner: dict[Any, tuple[int, Any, EpisodeTask]] = {}  # object ref -> (slot, actor, task)
+        owner = self._owner = {}  # the episodes the actors hold, for ``finished`` at a stop too
 
         def submit(slot: int, count: int) -> None:
             for task in _take(pending, count):
@@ -275,7 +278,7 @@ class RayBackend:
             done, _ = self._ray.wait(refs, num_returns=1, timeout=GCS_PROBE_S)
             if done:
                 return done[0]
-            if _answers(self._gcs):
+            if answers(self._gcs, GCS_PROBE_S):
                 silent_since = None
                 continue
             now = time.monotonic()
@@ -283,6 +286,24 @@ class RayBackend:
             if now - silent_since >= GCS_GONE_S:
                 self._gcs_gone = True  # close() then leaves Ray alone: its calls wait on the GCS
                 raise SweepStopped(stopped_answering(self._local, *self._gcs, GCS_GONE_S))
+
+    def finished(self, wait_s: float) -> tuple[list[EpisodeOutcome], int]:
+        """At a stop (pipelines.experiments.sweep_stop): the outcomes of the episodes the actors hold that
+        come back within ``wait_s`` (once the cluster's GCS is gone, only those back already: nothing came
+        for GCS_GONE_S, and Ray's waits without a timeout wait on it), and how many others were cut."""
+        ray, refs = self._ray, list(self._owner)
+        self._owner.clear()
+        if not refs:
+            return [], 0
+        done, _ = ray.wait(refs, num_returns=len(refs), timeout=0.0 if self._gcs_gone else wait_s)
+        lost = getattr(ray.exceptions, "RayError", ray.exceptions.RayActorError)
+        back = []
+        for ref in done:
+            try:  # back already: a bounded get all the same, on a cluster going away
+                back.append(ray.get(ref, timeout=GCS_PROBE_S))
+            except lost:  # its actor died, or it did not come: no episode finished
+                continue
+        return back, len(refs) - len(back)
 
     def close(self) -> None:
         if self._gcs_gone:  # Ray's kill and shutdown wait on the lost GCS until Ray ends the process
@@ -296,34 +317,6 @@ class RayBackend:
                 self._ray.kill(actor)
         if self._owns_ray:
             self._ray.shutdown()
-
-
-def _gcs_endpoint(ray: Any, address: str | None) -> tuple[str, int] | None:
-    """The (host, port) whose answer says the cluster is there: Ray Client's server for a ray:// address
-    (the driver reaches no other port of the cluster), else the GCS the driver is connected to; None where
-    Ray does not say (a stand-in ray, another Ray version)."""
-    from urllib.parse import urlsplit
-
-    try:
-        if address is not None and address.lower().startswith("ray://"):
-            parts = urlsplit(address)
-            host, port = parts.hostname, parts.port
-        else:
-            host, _, number = str(ray.get_runtime_context().gcs_address).rpartition(":")
-            port = int(number)
-    except (AttributeError, ValueError, TypeError):
-        return None
-    return (host, port) if host and port else None
-
-
-def _answers(endpoint: tuple[str, int]) -> bool:
-    import socket
-
-    try:
-        socket.create_connection(endpoint, timeout=GCS_PROBE_S).close()
-    except OSError:
-        return False
-    return True
 
 
 def _comparable(

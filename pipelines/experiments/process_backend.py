@@ -251,7 +251,8 @@ class ProcessBackend:
         self._drained = False  # until this run's episodes have all come back
         pending = iter(tasks)
         unsent: list[EpisodeTask] = []  # taken from ``pending`` but refused by a pool that broke meanwhile
-        in_flight: dict[Future[EpisodeOutcome], EpisodeTask] = {}
+        in_flight: dict[Future[EpisodeOutcome], EpisodeTask] = {}  # handed to the pool, not yielded yet
+        self._in_flight = in_flight  # what ``finished`` takes when the driver stops the sweep
         breaks = 0  # pool breaks since an episode last came back
         while True:
             broken = self._submit(in_flight, unsent, pending)
@@ -304,6 +305,21 @@ class ProcessBackend:
                 unsent.append(task)
                 return True
         return False
+
+    def finished(self, wait_s: float) -> tuple[list[EpisodeOutcome], int]:
+        """At a stop (pipelines.experiments.sweep_stop): the outcomes of the episodes handed to the pool and
+        not yielded that come back within ``wait_s`` (those ready at once first), and how many others were
+        in flight (cut: ``close`` ends them). The queued ones that no worker took are cancelled, not waited
+        for: nothing of them ran, and a worker that frees up must not start one."""
+        from concurrent.futures import wait
+
+        in_flight = getattr(self, "_in_flight", {})
+        taken = [future for future in in_flight if not future.cancel()]
+        wait(taken, timeout=wait_s)
+        # a future failed by the pool (a worker died meanwhile) finished no episode: cut with the running ones
+        back = [f.result() for f in taken if f.done() and f.exception() is None]
+        in_flight.clear()
+        return back, len(taken) - len(back)
 
     def _lost(self, in_flight: dict[Future[EpisodeOutcome], EpisodeTask]) -> tuple[list[EpisodeOutcome], int]:
         """The outcomes of the episodes in flight when the pool broke, and how many of them finished before

@@ -2,7 +2,8 @@
 wrong there is the user's set-up, not a bug, so each failure is one line naming the address (nothing
 listening at it, a dashboard's URL, a cluster that wants an authentication token, Ray's own refusals), a join
 that takes long says so, and on a cluster with fewer free CPUs than workers the sweep runs as many workers as
-fit. pipelines.experiments.backends' RayBackend calls it."""
+fit. It also finds and tries the port whose answer says the cluster is still there (``gcs_endpoint``,
+``answers``). pipelines.experiments.backends' RayBackend calls it."""
 
 from __future__ import annotations
 
@@ -51,6 +52,35 @@ def stopped_answering(local: bool, host: str, port: int, silent_s: float) -> str
         "`ray stop`, or its head lost); the episodes recorded stay, and the same command "
         "runs the rest once the cluster is back"
     )
+
+
+def gcs_endpoint(ray: Any, address: str | None) -> tuple[str, int] | None:
+    """The (host, port) whose answer says the cluster is there: Ray Client's server for a ray:// address
+    (the driver reaches no other port of the cluster), else the GCS the driver is connected to; None where
+    Ray does not say (a stand-in ray, another Ray version)."""
+    from urllib.parse import urlsplit
+
+    try:
+        if address is not None and address.lower().startswith("ray://"):
+            parts = urlsplit(address)
+            host, port = parts.hostname, parts.port
+        else:
+            host, _, number = str(ray.get_runtime_context().gcs_address).rpartition(":")
+            port = int(number)
+    except (AttributeError, ValueError, TypeError):
+        return None
+    return (host, port) if host and port else None
+
+
+def answers(endpoint: tuple[str, int], timeout_s: float) -> bool:
+    """Whether ``endpoint`` takes a TCP connection within ``timeout_s``: the cluster's GCS is there."""
+    import socket
+
+    try:
+        socket.create_connection(endpoint, timeout=timeout_s).close()
+    except OSError:
+        return False
+    return True
 
 
 def join_cluster(ray: Any, address: str, env: dict[str, Any], given: str = "--ray-address") -> None:

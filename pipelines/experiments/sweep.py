@@ -12,7 +12,9 @@ The parts, a module each: pipelines.experiments.log (the durable, resumable reco
 refuses a second sweep on the same directory), pipelines.experiments.worker (an episode run into a record,
 with its MCAP log under ``--record``), pipelines.experiments.backends (where the workers run: Ray, a process
 pool (pipelines.experiments.process_backend), or inline), pipelines.experiments.resume_checks (what a resumed
-sweep's records must match: the predictor weights and margins its cells plan with now). The configuration,
+sweep's records must match: the predictor weights and margins its cells plan with now),
+pipelines.experiments.outcome_write (an outcome written into the directory), pipelines.experiments.sweep_stop
+(what a sweep that stops part way keeps of its other workers' episodes). The configuration,
 ``SweepConfig`` and its bounds, is pipelines.experiments.sweep_config; ``SweepConfig`` is importable from here
 too, beside ``run_sweep`` (docs/examples/own_experiment.py).
 """
@@ -20,12 +22,10 @@ too, beside ``run_sweep`` (docs/examples/own_experiment.py).
 from __future__ import annotations
 
 import functools
-import json
 import sys
 import time
 from collections.abc import Callable, Collection, Mapping
 from dataclasses import asdict, dataclass, field
-from datetime import datetime
 from pathlib import Path
 from typing import Any, Final
 
@@ -39,15 +39,15 @@ from pipelines.experiments.log import (
     EpisodeLog,
     episode_log,
     error_keys,
-    mcap_path,
     read_sweep_file,
-    write_whole,
 )
+from pipelines.experiments.outcome_write import OutcomeWriter, local_time
 from pipelines.experiments.resume_checks import read_recorded
 from pipelines.experiments.reuse import check_source, seed_from
 from pipelines.experiments.run_lines import lost_runs, split_lost, write_sweep_file
 from pipelines.experiments.sweep_config import SweepConfig
 from pipelines.experiments.sweep_folder import check_sweep_directory, sweep_lock
+from pipelines.experiments.sweep_stop import keep_finished
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import make_scratch_root, release_scratch_root
 from pipelines.loop.interrupt import terminate_as_interrupt
@@ -85,17 +85,6 @@ class SweepOutcome:
         """Once the workers are up: the rate a long sweep approaches."""
         running = self.wall_s - self.startup_s
         return 60.0 * self.ran / running if running > 0 else 0.0
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        write_whole(path, data)
-    except OSError as exc:  # a full disk, a quota, `ulimit -f`: a write's OSError names no file
-        raise PipelineError(
-            f"{path}: could not write the episode's recording ({exc.strerror or exc}); the episodes recorded "
-            "before it are kept: free space and run the same sweep again to resume"
-        ) from None
 
 
 def _sweep_meta(out: Path, config: SweepConfig) -> dict[str, Any]:
@@ -137,7 +126,7 @@ def _add_run(
     _note_other_code(out, [r for k, r in enumerate(runs, 1) if runs_recorded is None or k in runs_recorded])
     runs.append(
         {
-            "started": _local_time(),
+            "started": local_time(),
             "version": crowdmpc_version(),
             "code": code_with_plugins(),
             "episodes_per_cell": config.episodes_per_cell,
@@ -301,7 +290,9 @@ def _run_tasks(
     FAIL_FAST_ERRORS episodes not ``retried`` (keys that raised in an earlier run) have raised: a broken
     method or setting, also when it extends a sweep; old failures raising again tell nothing new, and run
     after the new episodes. Stop too at a worker's ``stop`` (weights replaced since the driver checked them):
-    every later episode of that predictor met it, one error each."""
+    every later episode of that predictor met it, one error each. At a stop, the episodes the other workers
+    hand back within a bound are written first (pipelines.experiments.sweep_stop), and the SweepStopped
+    carries the workers the backend ran at once, for the report's projection."""
     out = Path(config.out)
     by_key = {t.key: t for t in todo}
     start = time.perf_counter()
@@ -313,39 +304,24 @@ def _run_tasks(
     try:
         run = started(backend.name)
         bar = _progress_bar(config, outcome)
-        for result in backend.run(todo):
-            task = by_key.get(result.key)
-            if task is None:  # a backend of one's own (backend_factory) answering for another episode
-                raise PipelineError(
-                    f"{backend.name} backend returned episode {result.key!r}, which it was not given"
-                )
-            if result.stop is not None:  # not written to errors.jsonl: no episode of it ran
-                raise SweepStopped(stopped_by(result.stop, outcome.already_done + outcome.ran, out))
-            if result.error is not None:
-                outcome.errors.append(result.key)
-                _append_error(out, task, result.error)
-                bar.set_postfix(errors=len(outcome.errors), refresh=False)
-                new_errors = sum(key not in retried for key in outcome.errors)
-                if outcome.ran == 0 and new_errors >= FAIL_FAST_ERRORS:
-                    last = result.error.strip().splitlines()[-1]
-                    raise SweepStopped(
-                        f"the first {len(outcome.errors)} episodes all raised ({last}); "
-                        f"tracebacks in {out / ERRORS_FILE}"
-                    )
-                continue
-            if result.record is None:
-                raise PipelineError(
-                    f"episode {result.key}: the worker returned neither a record nor an error"
-                )
-            if result.mcap is not None:
-                _write_atomic(mcap_path(out, task), result.mcap)  # before the record that vouches for it
-            # which run of sweep.json, hence which code, made it: a resume by other code keeps the earlier
-            # episodes (_note_other_code), and the lines' order alone does not say where one run ends
-            offset, line = log.append(result.record | {"run": run})
-            if records is not None:
-                records(offset, line, _read_back(log, line, result.key))
-            outcome.ran += 1
-            bar.update(1)
+        keep = OutcomeWriter(log, outcome, by_key, run, records, bar, backend.name)
+        refusal: str | None = None  # a worker's stop
+        try:
+            for result in backend.run(todo):
+                if result.stop is not None:  # not written to errors.jsonl: no episode of it ran
+                    refusal = result.stop
+                    break
+                keep(result)
+                if result.error is not None and outcome.ran == 0:
+                    _fail_fast(outcome, retried, result.error, out)
+        except SweepStopped as stopped:  # the backend's (a lost cluster, dying workers) or _fail_fast's
+            # what the other workers finished is written first (pipelines.experiments.sweep_stop)
+            cut = keep_finished(backend, keep)
+            raise SweepStopped(f"{stopped}{cut}", outcome.workers) from None
+        if refusal is not None:
+            cut = keep_finished(backend, keep)  # before the count of the episodes recorded
+            recorded = outcome.already_done + outcome.ran
+            raise SweepStopped(stopped_by(refusal, recorded, out) + cut, outcome.workers)
     finally:
         outcome.wall_s = time.perf_counter() - start
         if bar is not None:
@@ -353,14 +329,13 @@ def _run_tasks(
         backend.close()
 
 
-def _read_back(log: EpisodeLog, line: bytes, key: str) -> dict[str, Any]:
-    """The record of the line just appended to ``log``, as a scan of the log reads and checks it: a worker's
-    record as written (its numpy floats plain floats, its tuples lists), which the report of the run takes
-    without reading the log again."""
-    record = json.loads(line)
-    if log.check is not None:
-        log.check(record, f"{log.path} (the record of {key!r} this run appended)")
-    return record
+def _fail_fast(outcome: SweepOutcome, retried: Collection[str], error: str, out: Path) -> None:
+    """SweepStopped once FAIL_FAST_ERRORS episodes not ``retried`` have raised, none recorded yet."""
+    if sum(key not in retried for key in outcome.errors) >= FAIL_FAST_ERRORS:
+        last = error.strip().splitlines()[-1]
+        raise SweepStopped(
+            f"the first {len(outcome.errors)} episodes all raised ({last}); tracebacks in {out / ERRORS_FILE}"
+        )
 
 
 def _default_backend(config: SweepConfig, scratch: str) -> Backend:
@@ -373,16 +348,6 @@ def _default_backend(config: SweepConfig, scratch: str) -> Backend:
         scratch,
         config.episode_timeout_s,
     )
-
-
-def _local_time() -> str:
-    """Now, local time in ISO 8601's extended form ("2026-12-05T23:41:16+00:00"): strftime's %z gave a basic
-    offset, "+0000", which strict ISO readers refuse beside the extended date."""
-    return datetime.now().astimezone().isoformat(timespec="seconds")
-
-
-def _append_error(out: Path, task: EpisodeTask, error: str) -> None:
-    EpisodeLog(out / ERRORS_FILE).append({"key": task.key, "time": _local_time(), "error": error})
 
 
 def _progress_bar(config: SweepConfig, outcome: SweepOutcome) -> Any:

@@ -266,3 +266,45 @@ def test_a_sweeps_cpu_projection_is_for_the_workers_the_cluster_fits(
     assert re.search(
         r"the 2 planned episodes take (\d+\.\d) s of CPU: .* s for 2 workers on 2 free cores\n", err
     )
+
+
+def test_a_stopped_sweeps_cpu_projection_is_for_the_workers_the_cluster_fits(
+    listening, monkeypatch, capsys, tmp_path
+):
+    """A sweep on a cluster that fit 1 of --workers 2 and stopped answering (`ray start --head --num-cpus 1`,
+    then `ray stop` once the first records were in): its report projected "for 2 workers on 2 free cores",
+    as a stopped sweep's report took the workers asked. The stop carries the workers that ran. Stand-in Ray
+    here: one episode inline, then the stop as the backend raises it."""
+    from pipelines.errors import SweepStopped
+    from pipelines.experiments import backends
+    from pipelines.experiments.ray_join import stopped_answering
+
+    fake = _backend_ray(monkeypatch)
+    fake.available_resources = lambda: {"CPU": 2.0}  # type: ignore[attr-defined]
+    monkeypatch.setattr(backends, "ray_available", lambda: True)
+    inline = backends.InlineBackend("none")
+
+    def run_then_lost(self, tasks):
+        yield next(inline.run(tasks))
+        raise SweepStopped(stopped_answering(False, "127.0.0.1", 6391, 20.0))
+
+    monkeypatch.setattr(backends.RayBackend, "run", run_then_lost)
+    monkeypatch.setattr(backends.RayBackend, "close", lambda self: inline.close())
+    sweep = [
+        "sweep",
+        "--experiment",
+        "baselines",
+        "--humans",
+        "2",
+        "--episodes-per-cell",
+        "2",
+        "--jit",
+        "off",
+    ]
+    ray = ["--backend", "ray", "--ray-address", listening, "--workers", "4"]
+    from pipelines.cli import main
+
+    assert main([*sweep, *ray, "--no-progress", "--out", str(tmp_path / "sw")]) == 2
+    err = capsys.readouterr().err
+    assert "the 4 planned episodes take" in err and "s for 2 workers on 2 free cores\n" in err
+    assert err.strip().splitlines()[-1].startswith("crowdmpc sweep: error: the Ray cluster stopped answering")

@@ -314,7 +314,7 @@ def test_a_recording_the_disk_refuses_names_it_and_leaves_no_part(tmp_path):
     """`sweep --record` on a full disk ended in "could not write (No space left on device)" at best, naming
     no file (a write's OSError has none): one line naming the episode's recording now, no .part left, an
     earlier recording of that name as it was."""
-    from pipelines.experiments.sweep import _write_atomic
+    from pipelines.experiments.outcome_write import write_atomic as _write_atomic
 
     path = tmp_path / MCAP_DIR / "a.mcap"
     _write_atomic(path, b"old")

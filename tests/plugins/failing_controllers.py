@@ -123,3 +123,36 @@ class HangsInCloseToo(HangsOnCircles):
                 time.sleep(0.02)
             except Exception:  # noqa: S112 (the point: a catch-all that a time limit must get past)
                 continue
+
+
+class RefusesWeights(StraightLine):
+    """Refuses its episodes as a sweep's worker refuses weights replaced in the zoo since the driver checked
+    them (pipelines.experiments.checked_weights): the sweep stops at the first."""
+
+    name = "refuses_weights"
+
+    def reset(self, obs: Observation) -> None:
+        from pipelines.experiments.checked_weights import WeightsReplaced
+
+        raise WeightsReplaced("predictor 'mine': the weights were replaced (a stand-in refusal)")
+
+
+class TakesASecond(StraightLine):
+    """StraightLine whose episodes each take a second more: on another worker, one still running when a
+    refusal stops the sweep, and back within the stop's wait."""
+
+    name = "takes_a_second"
+
+    def reset(self, obs: Observation) -> None:
+        time.sleep(1.0)
+        super().reset(obs)
+
+
+class SleepsInReset(StraightLine):
+    """StraightLine whose episodes take a minute: one in flight that a stop's bounded wait cuts."""
+
+    name = "sleeps_in_reset"
+
+    def reset(self, obs: Observation) -> None:
+        time.sleep(60.0)
+        super().reset(obs)

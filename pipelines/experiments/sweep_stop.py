@@ -1,0 +1,45 @@
+"""What a sweep that stops part way keeps of the episodes its other workers ran.
+
+A sweep stops (SweepStopped) at a worker's refusal of weights replaced in the zoo (checked_weights), at its
+Ray cluster's silence (backends.GCS_GONE_S), at workers that keep dying, or at its first episodes all
+raising. The driver stopped at once and closed the backend: the episodes the other workers had finished, or
+were about to hand back, ended unrecorded, and a rerun ran them again (met with ``--workers 2`` and a `zoo
+add --replace` during a Table II sweep: three episodes in flight came back within 5 s of the refusal, all
+lost). Now the driver writes what the backend's ``finished`` gives back within ``STOP_WAIT_S`` (a backend of
+one's own without it: nothing), as it writes every outcome; the episodes still running then are cut, and
+the stop's line says how many, which a resume runs. The stop also carries the workers the backend ran at
+once (``SweepStopped.workers``): the report's CPU projection divides by them, as a finished run's does.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, Final
+
+from pipelines.experiments.worker import EpisodeOutcome
+from predictors.text_table import counted
+
+# How long a stop waits for the episodes in flight (a worker's result on its way, an episode about to end):
+# bounded, so that a stop on a dead cluster or a hung episode never hangs; those still running are cut.
+STOP_WAIT_S: Final[float] = 5.0
+
+
+def keep_finished(backend: Any, keep: Callable[[EpisodeOutcome], None]) -> str:
+    """Write (``keep``) each outcome ``backend`` gives back within STOP_WAIT_S of a stop; the stop line's
+    tail that counts the episodes cut. Another worker's refusal (``stop``) ran nothing and is not written."""
+    finished = getattr(backend, "finished", None)
+    back, cut = finished(STOP_WAIT_S) if finished is not None else ([], 0)
+    for outcome in back:
+        if outcome.stop is None:
+            keep(outcome)
+    return cut_note(cut)
+
+
+def cut_note(cut: int) -> str:
+    """The stop line's tail for ``cut`` episodes in flight, unrecorded ("" for none)."""
+    if cut == 0:
+        return ""
+    return (
+        f"; {counted(cut, 'episode')} in flight on the workers {'was' if cut == 1 else 'were'} cut "
+        f"unrecorded (a resume runs {'it' if cut == 1 else 'them'})"
+    )
