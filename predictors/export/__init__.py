@@ -1,8 +1,9 @@
 """Automatic torch -> CasADi export of predictor nets (``export_function``), with its one error type.
 
-``symbolic`` holds the symbolic tensor torch code runs on; ``elementwise``, ``movement``, ``linalg`` and
-``layers`` the operations, which ``ops`` enters in the dispatch tables; ``trace`` the run (and the recurrent
-cells) and the ``casadi.Function`` it becomes; ``parity`` the check against torch.
+``symbolic`` holds the symbolic tensor torch code runs on; ``elementwise``, ``movement``, ``linalg``,
+``layers`` and ``attention`` the operations, which ``ops`` enters in the dispatch tables; ``trace`` the run
+(and the layers it replaces: the recurrent cells, nn.MultiheadAttention) and the ``casadi.Function`` it
+becomes; ``parity`` the check against torch.
 """
 
 from predictors.export.errors import ExportError

@@ -1,4 +1,5 @@
-"""Network layers (layer norm, attention, dropout) and the constants torch code creates."""
+"""Network layers (layer norm, dropout; attention is ``predictors.export.attention``) and the constants torch
+code creates."""
 
 from __future__ import annotations
 
@@ -8,10 +9,8 @@ from collections.abc import Callable
 import casadi as ca
 import torch
 
-from predictors.export.elementwise import add, operand
 from predictors.export.errors import ExportError, current_module
-from predictors.export.linalg import matmul, softmax_rows
-from predictors.export.movement import reshape, shape_args, transpose
+from predictors.export.movement import reshape, shape_args
 from predictors.export.symbolic import (
     SymTensor,
     as_float,
@@ -33,31 +32,6 @@ def layer_norm(x, normalized_shape, weight=None, bias=None, eps=1e-5):
     if bias is not None:
         y = y + ca.repmat(lift(reshape(lift(bias), (1, width))).m, y.shape[0], 1)
     return reshape(SymTensor(y, flat.shape_), x.shape_)
-
-
-def scaled_dot_product_attention(
-    query, key, value, attn_mask=None, dropout_p=0.0, is_causal=False, scale=None, enable_gqa=False
-):
-    if dropout_p:
-        raise ExportError("scaled_dot_product_attention with dropout_p > 0", current_module())
-    q, k, v = lift(query), lift(key), lift(value)
-    factor = 1 / math.sqrt(q.shape_[-1]) if scale is None else scale
-    scores = matmul(q, transpose(k, -2, -1))
-    scores = SymTensor(scores.m * factor, scores.shape_)
-    mask = None
-    if is_causal:
-        length, source = scores.shape_[-2:]
-        attn_mask = torch.ones(length, source, dtype=torch.bool).tril()
-    if attn_mask is not None:
-        m = lift(attn_mask)
-        if m.is_bool:
-            mask = operand(m, scores.shape_)
-        else:
-            scores = add(scores, m)
-            mask = scores.m != -math.inf  # torch's attention masks by -inf, so these are its masked keys
-    # torch gives a row with every key masked 0 (its _safe_softmax), not softmax's NaN
-    weights = SymTensor(softmax_rows(scores.m, mask, empty_rows_zero=True), scores.shape_)
-    return matmul(weights, v)
 
 
 def dropout(x, p=0.5, training=False, inplace=False):

@@ -14,6 +14,7 @@ import casadi as ca
 import torch
 import torch.nn.functional as F
 
+from predictors.export.attention import scaled_dot_product_attention
 from predictors.export.elementwise import (
     add,
     binary,
@@ -41,7 +42,6 @@ from predictors.export.layers import (
     new_constant,
     new_full,
     ones_like,
-    scaled_dot_product_attention,
     zeros_like,
 )
 from predictors.export.linalg import (

@@ -2,9 +2,9 @@
 
 ``export_function(net, method, inputs, outputs, name)`` calls ``method`` (e.g. ``net.decode_step``) with one
 ``SymTensor`` per input. While it runs, the recurrent cells (``nn.LSTMCell``, ``nn.GRUCell``, whose forward
-calls fused kernels) are replaced by their CasADi forms on this instance only, and a pair of global module
-hooks keeps the path of the module that runs (``pool.embedding``), so that an unsupported operation is
-reported where it happens.
+calls fused kernels) and ``nn.MultiheadAttention`` are replaced by their CasADi forms on this instance only,
+and a pair of global module hooks keeps the path of the module that runs (``pool.embedding``), so that an
+unsupported operation is reported where it happens.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import casadi as ca
 import torch
 from torch import nn
 
+from predictors.export.attention import multihead_attention
 from predictors.export.elementwise import sigmoid
 from predictors.export.errors import LAYER_STACK, MODULE_STACK, TRACING, ExportError, current_module
 from predictors.export.linalg import linear
@@ -102,19 +103,27 @@ def gru_cell(cell: nn.GRUCell, input: Any, hx: Any = None) -> SymTensor:  # noqa
     return h_new if batched else squeeze(h_new, 0)
 
 
-CELLS: dict[type[nn.Module], Callable[..., Any]] = {nn.LSTMCell: lstm_cell, nn.GRUCell: gru_cell}
+# The layers whose forward is replaced by its CasADi form while traced: the recurrent cells call fused
+# kernels, and nn.MultiheadAttention's forward asks its inputs what a symbolic tensor cannot answer
+# (query.is_nested, torch.is_floating_point of a mask) to choose torch's fast path.
+REPLACED: dict[type[nn.Module], Callable[..., Any]] = {
+    nn.LSTMCell: lstm_cell,
+    nn.GRUCell: gru_cell,
+    nn.MultiheadAttention: multihead_attention,
+}
 
 
 # ----------------------------------------------------------------------------------------------- tracing
 @contextmanager
 def symbolic_run(net: nn.Module) -> Iterator[None]:
-    """While inside: the net's cells compute on SymTensors, and ``MODULE_STACK`` names the running module."""
+    """While inside: the net's cells and attention layers compute on SymTensors, and ``MODULE_STACK`` names
+    the running module."""
     names = {id(module): name or type(net).__name__ for name, module in net.named_modules()}
     patched = []
     for module in net.modules():
-        cell = CELLS.get(type(module))
-        if cell is not None:
-            module.forward = functools.partial(cell, module)  # this instance only, removed below
+        form = REPLACED.get(type(module))
+        if form is not None:
+            module.forward = functools.partial(form, module)  # this instance only, removed below
             patched.append(module)
 
     def enter(module, args):

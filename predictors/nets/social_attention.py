@@ -14,7 +14,7 @@ embedding has to learn to ignore the far ones. That embedding and the feed-forwa
 from the robots' plan to the predictions is smooth for the NLP.
 
 Both ``encode`` and ``decode_step`` are run on symbolic tensors by the CasADi exporter: only the ops it
-knows (no ``torch.eye``, no ``nn.MultiheadAttention``, no in-place writes, no branching on tensor values).
+knows (no ``torch.eye``, no in-place writes, no branching on tensor values).
 """
 
 from __future__ import annotations
