@@ -1,4 +1,4 @@
-"""Reductions, softmax, linear layers, matmul and einsum."""
+"""Reductions (the extremes are ``predictors.export.extremes``), softmax, linear layers, matmul and einsum."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from predictors.export.symbolic import (
 
 
 # ------------------------------------------------------------------------------------------- reductions
-def _to_last(x: SymTensor, dims: Sequence[int]) -> tuple[SymTensor, tuple[int, ...]]:
+def to_last(x: SymTensor, dims: Sequence[int]) -> tuple[SymTensor, tuple[int, ...]]:
     """``x`` with ``dims`` moved to the end and merged into one column block; the kept shape."""
     keep = [d for d in range(x.ndim) if d not in dims]
     moved = (
@@ -31,7 +31,7 @@ def _to_last(x: SymTensor, dims: Sequence[int]) -> tuple[SymTensor, tuple[int, .
     return reshape(moved, kept + (math.prod(x.shape_[d] for d in dims),)), kept
 
 
-def _reduce_dims(x: SymTensor, dim) -> list[int]:
+def reduce_dims(x: SymTensor, dim) -> list[int]:
     if dim is None or (isinstance(dim, (tuple, list)) and not dim):  # torch reduces every dim for dim=[]
         return list(range(x.ndim))
     dims = dim if isinstance(dim, (tuple, list)) else (dim,)
@@ -42,8 +42,8 @@ def reduce_sum(x, dim=None, keepdim=False, *, dtype=None):
     x = as_float(lift(x))
     if not x.shape_:
         return x
-    dims = _reduce_dims(x, dim)
-    merged, kept = _to_last(x, dims)
+    dims = reduce_dims(x, dim)
+    merged, kept = to_last(x, dims)
     out = SymTensor(ca.sum2(merged.m), kept + (1,))
     shape = tuple(1 if d in dims else s for d, s in enumerate(x.shape_)) if keepdim else kept
     return reshape(out, shape)
@@ -51,43 +51,16 @@ def reduce_sum(x, dim=None, keepdim=False, *, dtype=None):
 
 def mean(x, dim=None, keepdim=False, *, dtype=None):
     x = lift(x)
-    count = math.prod(x.shape_[d] for d in _reduce_dims(x, dim))
+    count = math.prod(x.shape_[d] for d in reduce_dims(x, dim))
     total = reduce_sum(x, dim, keepdim)
     return SymTensor(total.m / count, total.shape_)
-
-
-def _extreme(x, dim, keepdim, sign: int) -> SymTensor:
-    """The largest (``sign`` 1) or smallest (-1) entry over ``dim``, as torch's amax / amin: the mean of the
-    entries that equal it, so that ties share the gradient evenly, as torch's does (a chain of fmax gave
-    three equal entries 1/4, 1/4 and 1/2). The comparisons' derivative is 0."""
-    x = as_float(lift(x))
-    if not x.shape_:
-        return x
-    dims = _reduce_dims(x, dim)
-    merged, kept = _to_last(x, dims)
-    m = merged.m * sign
-    top = ca.repmat(_row_max(m), 1, m.shape[1])
-    ties = m == top
-    # if_else, not m * ties: an entry of -inf that is not the extreme would make 0 * -inf NaN
-    value = ca.sum2(ca.if_else(ties, merged.m, 0)) / ca.sum2(ties)
-    out = SymTensor(value, kept + (1,))
-    shape = tuple(1 if d in dims else s for d, s in enumerate(x.shape_)) if keepdim else kept
-    return reshape(out, shape)
-
-
-def amax(x, dim=(), keepdim=False, *, out=None):
-    return _extreme(x, dim, keepdim, 1)
-
-
-def amin(x, dim=(), keepdim=False, *, out=None):
-    return _extreme(x, dim, keepdim, -1)
 
 
 def _count_true(x, dim, keepdim) -> tuple[SymTensor, int]:
     """How many entries over ``dim`` are true (nonzero, as torch reads a number), and of how many."""
     x = lift(x)
     nonzero = SymTensor(x.m != 0, x.shape_)  # 0/1, summed exactly
-    return reduce_sum(nonzero, dim, keepdim), math.prod(x.shape_[d] for d in _reduce_dims(x, dim))
+    return reduce_sum(nonzero, dim, keepdim), math.prod(x.shape_[d] for d in reduce_dims(x, dim))
 
 
 def any_true(x, dim=None, keepdim=False, *, out=None):
@@ -136,7 +109,7 @@ def vector_norm(x, ord=2, dim=None, keepdim=False, *, dtype=None, out=None):  # 
 def linalg_norm(x, ord=None, dim=None, keepdim=False, *, out=None, dtype=None):  # noqa: A002
     """``torch.linalg.norm``: the vector 2-norm, or a matrix's Frobenius norm (``ord`` None or 'fro')."""
     x = lift(x)
-    matrix = len(_reduce_dims(x, dim)) == 2 if dim is not None else x.ndim == 2
+    matrix = len(reduce_dims(x, dim)) == 2 if dim is not None else x.ndim == 2
     _order("torch.linalg.norm", ord, (None, "fro") if matrix else (None, 2, 2.0))
     return two_norm(x, dim, keepdim)
 
@@ -176,7 +149,7 @@ def cdist(x1, x2, p=2.0, compute_mode=None):
     return two_norm(sub(unsqueeze(a, -2), unsqueeze(b, -3)), -1)
 
 
-def _row_max(m):
+def row_max(m):
     top = m[:, 0]
     for j in range(1, m.shape[1]):
         top = ca.fmax(top, m[:, j])
@@ -192,7 +165,7 @@ def softmax_rows(m, mask=None, *, empty_rows_zero=False):
     cols = m.shape[1]
     shifted = m if mask is None else ca.if_else(mask, m, -1e300, False)
     # The shift by the row's maximum changes no value (softmax is shift invariant) but keeps exp finite.
-    e = ca.exp(m - ca.repmat(_row_max(shifted), 1, cols))
+    e = ca.exp(m - ca.repmat(row_max(shifted), 1, cols))
     if mask is not None:
         e = ca.if_else(mask, e, 0, False)
     total = ca.sum2(e)
@@ -206,7 +179,7 @@ def log_softmax_rows(m):
     """``log(softmax)`` of every row as ``m - max - log(sum(exp(m - max)))``: the log of a softmax that has
     underflowed would be -inf (a logit gap above ~745) where torch's is exact."""
     cols = m.shape[1]
-    shifted = m - ca.repmat(_row_max(m), 1, cols)
+    shifted = m - ca.repmat(row_max(m), 1, cols)
     return shifted - ca.repmat(ca.log(ca.sum2(ca.exp(shifted))), 1, cols)
 
 

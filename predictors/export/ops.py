@@ -35,6 +35,7 @@ from predictors.export.elementwise import (
     where,
 )
 from predictors.export.errors import detach
+from predictors.export.extremes import amax, amin, maximum, minimum, values_and_indices
 from predictors.export.layers import (
     dropout,
     full_like,
@@ -46,8 +47,6 @@ from predictors.export.layers import (
 )
 from predictors.export.linalg import (
     all_true,
-    amax,
-    amin,
     any_true,
     cdist,
     einsum,
@@ -123,8 +122,8 @@ BINARY: dict[str, Callable[..., Any]] = {
     "div": div,
     "true_divide": div,
     "pow": power,
-    "maximum": lambda a, b: binary(ca.fmax, a, b),
-    "minimum": lambda a, b: binary(ca.fmin, a, b),
+    "maximum": maximum,
+    "minimum": minimum,
     "eq": _comparison(lambda p, q: p == q),
     "ne": _comparison(lambda p, q: p != q),
     "ge": _comparison(lambda p, q: p >= q),
@@ -261,6 +260,10 @@ def _functions() -> dict[Any, Callable[..., Any]]:
         torch.amin: amin,
         torch.Tensor.amax: amax,
         torch.Tensor.amin: amin,
+        torch.max: values_and_indices("torch.max(x, dim)", 1, torch.return_types.max),
+        torch.min: values_and_indices("torch.min(x, dim)", -1, torch.return_types.min),
+        torch.Tensor.max: values_and_indices("x.max(dim)", 1, torch.return_types.max),
+        torch.Tensor.min: values_and_indices("x.min(dim)", -1, torch.return_types.min),
         torch.Tensor.detach: detach,
         torch.Tensor.contiguous: identity,
         torch.Tensor.clone: identity,
@@ -288,4 +291,6 @@ def _methods() -> dict[str, Callable[..., Any]]:
         "all": all_true,
         "amax": amax,
         "amin": amin,
+        "max": values_and_indices("x.max(dim)", 1, torch.return_types.max),
+        "min": values_and_indices("x.min(dim)", -1, torch.return_types.min),
     }

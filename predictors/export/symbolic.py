@@ -19,7 +19,7 @@ from __future__ import annotations
 import inspect
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NoReturn
 
 import casadi as ca
 import numpy as np
@@ -75,6 +75,11 @@ class SymTensor:
     # --------------------------------------------------------------------------------- torch protocol
     @classmethod
     def __torch_function__(cls, func, types, args=(), kwargs=None):
+        # torch asks the arguments' types in turn: the indices of x.max(dim) beside a symbolic tensor are
+        # refused for what they are, not as an operation the tables lack
+        found = first_unexportable((*args, *(kwargs or {}).values()))
+        if found is not None:
+            found.refuse()
         handler = HANDLERS.get(func)
         if handler is None:
             raise unsupported(f"operation {op_name(func)}")
@@ -196,6 +201,57 @@ class SymTensor:
 METHODS: dict[str, Callable[..., Any]] = {}
 
 
+class Unexportable:
+    """What torch code gets in place of a value no exported function can give (the indices of
+    ``x.max(dim)``): harmless while unused, and any use of it (a torch operation, arithmetic, indexing,
+    reading it, returning it) refused with ``why``."""
+
+    __slots__ = ("why",)
+
+    def __init__(self, why: str):
+        self.why = why
+
+    def refuse(self, *args: Any, **kwargs: Any) -> NoReturn:
+        raise ExportError(self.why, current_module())
+
+    @classmethod
+    def __torch_function__(cls, func, types, args=(), kwargs=None):
+        found = first_unexportable((*args, *(kwargs or {}).values()))
+        if found is None:  # torch calls this for an instance among the arguments, so it is there
+            raise unsupported(f"operation {op_name(func)}")
+        found.refuse()
+
+    def __getattr__(self, name: str):
+        if name.startswith("__"):  # copy's and pickle's probes, not a use
+            raise AttributeError(name)
+        self.refuse()
+
+    __hash__ = object.__hash__
+
+    def __repr__(self) -> str:
+        return f"Unexportable({self.why!r})"
+
+
+# Every operator and conversion Python or numpy may apply to a value, each a use of it.
+for _name in (
+    "add radd sub rsub mul rmul truediv rtruediv floordiv rfloordiv mod rmod pow rpow matmul rmatmul and "
+    "rand or ror xor rxor neg pos invert abs lt le gt ge eq ne getitem iter len bool int float index array"
+).split():
+    setattr(Unexportable, f"__{_name}__", Unexportable.refuse)
+
+
+def first_unexportable(values: Any) -> Unexportable | None:
+    """The first ``Unexportable`` among ``values`` or in a list or tuple among them (``torch.cat([...])``)."""
+    for value in values:
+        if isinstance(value, Unexportable):
+            return value
+        if isinstance(value, (list, tuple)):
+            found = first_unexportable(value)
+            if found is not None:
+                return found
+    return None
+
+
 def call(name: str, *args, **kwargs):
     return METHODS[name](*args, **kwargs)
 
@@ -243,6 +299,8 @@ def lift(value: Any) -> SymTensor:
     """A SymTensor of ``value`` (a SymTensor already, or a constant)."""
     if isinstance(value, SymTensor):
         return value
+    if isinstance(value, Unexportable):
+        value.refuse()
     array = constant(value)
     is_bool = isinstance(value, torch.Tensor) and value.dtype == torch.bool
     return SymTensor(matrix_of(array), array.shape, is_bool)

@@ -25,7 +25,7 @@ from predictors.export.errors import LAYER_STACK, MODULE_STACK, TRACING, ExportE
 from predictors.export.linalg import linear
 from predictors.export.movement import squeeze, unsqueeze
 from predictors.export.ops import register
-from predictors.export.symbolic import SymTensor, lift
+from predictors.export.symbolic import SymTensor, Unexportable, lift
 
 register()  # the dispatch tables SymTensor consults, filled before anything is exported
 
@@ -177,6 +177,8 @@ def _traced(net: nn.Module, method: Callable[..., Any], tensors: Sequence[SymTen
 
 
 def _flat_output(value: Any, what: str) -> Any:
+    if isinstance(value, Unexportable):  # the indices of x.max(dim), returned
+        value.refuse()
     if isinstance(value, (SymTensor, torch.Tensor)):
         return lift(value).flat()
     raise ExportError(f"{what} is a {type(value).__name__}, not a tensor", current_module())

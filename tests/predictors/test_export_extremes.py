@@ -1,6 +1,7 @@
-"""torch.amax / torch.amin and their methods exported against torch to 1e-9 in values and Jacobians: over
-every dim, one, several, with keepdim, with ties (torch shares the gradient evenly among equal entries) and
-with -inf entries (a masked neighbour).
+"""torch.amax / torch.amin, torch.max / torch.min and their methods exported against torch to 1e-9 in values
+and Jacobians: over every dim, one, several, with keepdim, with ties (torch shares amax's gradient evenly
+among equal entries, and gives max(dim)'s to the first) and with -inf entries (a masked neighbour); the
+indices of max(dim), which cannot be exported, refused where they are used.
 
 A user's net max-pooling its neighbours' features, `torch.where(valid, feats, -1e4).amax(dim=2)`, was refused
 by `crowdmpc export` ("unsupported tensor method .amax()").
@@ -14,8 +15,9 @@ import casadi as ca
 import numpy as np
 import pytest
 import torch
+import torch.nn.functional as F
 
-from predictors.export import TensorSpec, export_function
+from predictors.export import ExportError, TensorSpec, export_function
 from tests.predictors.test_export import Wrap
 
 INF = math.inf
@@ -47,3 +49,85 @@ def test_amax_and_amin_match_torch_in_values_and_jacobians(name, point, symbol):
     got = np.asarray(ca.Function("j", [a], [ca.jacobian(function(a), a)])(x.numpy().ravel()))
     torch_jac = torch.autograd.functional.jacobian(lambda y: module(y).reshape(-1), x).reshape(got.shape)
     np.testing.assert_allclose(got, torch_jac.numpy(), rtol=0, atol=1e-9)
+
+
+# torch.max / torch.min and their methods in each of torch's forms. Over a dim torch's gradient goes to the
+# first extreme entry (the index it returns), where amax's is shared among ties: the "ties" point tells them
+# apart. `x.max(dim)` was refused ("unsupported tensor method .max()"), and the guide said to write amax.
+MAX_MIN = {
+    "method_values": lambda m, x: x.max(dim=1).values + 2 * x.min(0).values,
+    "function_keepdim": lambda m, x: (
+        torch.max(x, 1, keepdim=True)[0] * x + torch.min(x, dim=0, keepdim=True)[0]
+    ),
+    "unpacked": lambda m, x: _values_only(*torch.max(x, -1)) + 2 * _values_only(*x.min(-2)),
+    "every_entry": lambda m, x: torch.max(x) + 2 * x.min() + x,
+    "elementwise": lambda m, x: torch.max(x, x.T) + 2 * torch.min(x, other=0.5 * x) + 4 * x.max(x * x),
+    "masked": lambda m, x: torch.where(x > 0, x, torch.full_like(x, -INF)).max(-1).values,
+    "of_a_mask": lambda m, x: (x > 0.45).max(1).values * x[:, 0] + (x > 0.45).min(dim=1)[0] * x[:, 1],
+}
+POINTS_AND_RANDOM = POINTS | {
+    "random": torch.randn(3, 3, generator=torch.Generator().manual_seed(0)).tolist()
+}
+
+
+def _values_only(values, indices):
+    return values
+
+
+@pytest.mark.parametrize("symbol", [ca.MX, ca.SX], ids=["MX", "SX"])
+@pytest.mark.parametrize("point", sorted(POINTS_AND_RANDOM))
+@pytest.mark.parametrize("name", sorted(MAX_MIN))
+def test_max_and_min_values_match_torch_in_values_and_jacobians(name, point, symbol):
+    module = Wrap(MAX_MIN[name]).double()
+    x = torch.tensor(POINTS_AND_RANDOM[point], dtype=torch.float64)
+    function = export_function(module, module.forward, [TensorSpec("x", (3, 3))], ["y"], "f", symbol=symbol)
+    with torch.no_grad():
+        expected = module(x).reshape(-1).numpy()
+    np.testing.assert_allclose(np.asarray(function(x.numpy().ravel())).ravel(), expected, rtol=0, atol=1e-9)
+    a = ca.MX.sym("a", 9)
+    got = np.asarray(ca.Function("j", [a], [ca.jacobian(function(a), a)])(x.numpy().ravel()))
+    torch_jac = torch.autograd.functional.jacobian(lambda y: module(y).reshape(-1), x).reshape(got.shape)
+    np.testing.assert_allclose(got, torch_jac.numpy(), rtol=0, atol=1e-9)
+
+
+INDICES = "indices cannot be exported, only values: use"
+
+
+@pytest.mark.parametrize(
+    ("fn", "message"),
+    [
+        (lambda m, x: torch.gather(x, 1, x.max(1, keepdim=True).indices), "x.max(dim)"),
+        (lambda m, x: x.max(1).indices + x[:, 0], "x.max(dim)"),
+        (lambda m, x: x.min(1)[1].float() * x[:, 0], "x.min(dim)"),
+        (lambda m, x: x[x.max(0).indices], "x.max(dim)"),
+        (lambda m, x: x * (torch.max(x, 1)[1] == 2)[:, None], "torch.max(x, dim)"),
+        (lambda m, x: F.one_hot(torch.min(x, -1).indices, 3) * x, "torch.min(x, dim)"),
+        (lambda m, x: torch.cat([x.max(1).indices, x[0]]), "x.max(dim)"),
+        (lambda m, x: x.max(1).indices, "x.max(dim)"),
+    ],
+    ids=["gather", "arithmetic", "conversion", "indexing", "comparison", "one_hot", "in_a_list", "returned"],
+)
+def test_indices_used_later_are_refused_saying_to_use_the_values(fn, message):
+    x = torch.tensor(POINTS["distinct"], dtype=torch.float64)
+    fn(None, x)  # torch runs it
+    module = Wrap(fn).double()
+    with pytest.raises(ExportError) as info:
+        export_function(module, module.forward, [TensorSpec("x", (3, 3))], ["y"], "f")
+    kind = "amin" if "min" in message else "amax"
+    assert str(info.value).startswith(
+        f"cannot export: the indices of {message} are used: {INDICES} {message}.values or "
+        f"torch.{kind}(x, dim) (in module "
+    )
+    assert "\n" not in str(info.value)
+
+
+def test_max_over_several_dims_is_refused_as_torch_refuses_it():
+    """torch's argument parser refuses torch.max(x, (0, 1)) before the export sees it (a TypeError while
+    tracing, in one line); x.max((0, 1)) reaches the export, which refuses it too, saying what to use."""
+    with pytest.raises(TypeError):
+        torch.zeros(3, 3).max((0, 1))
+    module = Wrap(lambda m, x: x.max((0, 1)).values).double()
+    with pytest.raises(
+        ExportError, match=r"x\.max over dim=\(0, 1\) \(one int, as torch takes; torch\.amax takes"
+    ):
+        export_function(module, module.forward, [TensorSpec("x", (3, 3))], ["y"], "f")
