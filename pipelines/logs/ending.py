@@ -79,6 +79,11 @@ def ended_by(rec: Recording, metrics: dict[str, Any] | None) -> str | None:
         return None
     if steps == limit:
         return TIME_LIMIT
+    # the loops record whether a contact could end it: where none could, a loop of its own stopped it (a
+    # TimeLimit around ObserveEpisodes), even on a step that touched; in a file older than that record, a
+    # contact in the last step is read as what ended it
+    if rec.episode().get("end_on_collision") == "false":
+        return CUT_SHORT
     touched = _last_step_contact(rec)
     if touched is None:
         return None

@@ -12,7 +12,7 @@ solver messages carry their simulation time too ("time", s, and "step"). Channel
                         (behind a sensor, a ring of its range per robot)
   /episode/metrics      once, at the end
 Metadata records: "crowdmpc" (version, format), "episode" (seed, scenario, controller, predictor, checkpoint
-sha256, sizes, start_time_ns), "config" and "run" (JSON-encoded values).
+sha256, sizes, start_time_ns, end_on_collision), "config" and "run" (JSON-encoded values).
 """
 
 from __future__ import annotations
@@ -158,6 +158,10 @@ class McapEpisodeRecorder:
             "radius": repr(float(obs.radius)),
             "start_time_ns": str(self._start_ns),
         }
+        # whether a contact ends the episode (contract.episode_meta): review tells by it a contact's end from
+        # a loop's cut; an observer called by the user's own loop may be given no such key
+        if "end_on_collision" in meta:
+            episode["end_on_collision"] = json.dumps(bool(meta["end_on_collision"]))
         config = _metadata_strings(meta.get("config") or {})
         metadata = {
             # strings as they are (the version reads "0.1.0", not "\"0.1.0\""), the rest in JSON

@@ -37,6 +37,7 @@ OWN_FIELDS: Final[tuple[str, ...]] = (
     "predictor",
     "predictor_sha256",
     "config",
+    "end_on_collision",  # whether a contact ends the episode: review's "ended" (pipelines.logs.ending)
 )
 
 
@@ -306,10 +307,14 @@ def episode_meta(
     described: Mapping[str, Any] | None,
     meta: Mapping[str, Any] | None,
     where: str,
+    *,
+    end_on_collision: bool = False,
 ) -> dict[str, Any]:
     """The meta ``on_reset`` gets: the episode (seed, scenario, sizes), who drives, the environment's
     config plus what the controller's ``describe()`` adds (``checked_description``), then ``meta``
-    (``checked_meta``), which may not set any of those."""
+    (``checked_meta``), which may not set any of those. ``end_on_collision``: whether a contact ends the
+    episode (the gymnasium environment's; never in ``run_episode``), so that a review tells an episode a
+    contact ended from one a loop of its own cut short on a step that touched."""
     extra = dict(described or {})
     full: dict[str, Any] = {
         **episode,
@@ -317,6 +322,7 @@ def episode_meta(
         "predictor": predictor,
         "predictor_sha256": None,
         "config": episode_config(env_config, {"config": extra.pop("config", {})}),
+        "end_on_collision": bool(end_on_collision),
     }
     full.update(extra)
     full.update(checked_meta(meta, where))

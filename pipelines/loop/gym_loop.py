@@ -144,7 +144,14 @@ def run_gym_episode(
     called(controller, "reset", handed_out(obs))
     described = checked_description(controller)
     full_meta = episode_meta(
-        base.episode, base.config, controller.name, controller.predictor, described, meta, "run_gym_episode"
+        base.episode,
+        base.config,
+        controller.name,
+        controller.predictor,
+        described,
+        meta,
+        "run_gym_episode",
+        end_on_collision=base.end_on_collision,
     )
     steps = EpisodeSteps()
     done = False
@@ -232,7 +239,14 @@ class ObserveEpisodes(
         self._obs = handed_out(info["observation"])
         base = self._base
         self._meta = episode_meta(
-            base.episode, base.config, self.controller, None, None, self.meta, "ObserveEpisodes"
+            base.episode,
+            base.config,
+            self.controller,
+            None,
+            None,
+            self.meta,
+            "ObserveEpisodes",
+            end_on_collision=base.end_on_collision,
         )
         self._steps = EpisodeSteps()
         for observer in self.observers:

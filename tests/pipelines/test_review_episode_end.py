@@ -15,6 +15,7 @@ import crowdsim  # noqa: F401  (registers the environment)
 from crowdsim.gym_env import POSITION, PRESENT
 from crowdsim.gym_wrappers import VelocityControl
 from pipelines.cli import main
+from pipelines.logs.ending import _last_step_contact
 from pipelines.logs.reader import read_recording
 from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.logs.review import format_summary, summarize
@@ -204,3 +205,24 @@ def test_metrics_of_no_step_count_are_left_out_and_fail_the_check(tmp_path, caps
     assert summarize(read_recording(edited))["ended_by"] is None
     assert main(["review", str(edited), "--check"]) == 1
     assert f"'metrics' 'n_steps' is {n_steps!r}, expected a count of steps" in capsys.readouterr().out
+
+
+def test_a_loop_that_stops_on_a_step_that_touched_is_no_contact_end(tmp_path):
+    """A TimeLimit around ObserveEpisodes that cut an episode on a step where a robot touched a human read
+    "ended: contact" (outputs.md: a contact ends only an episode with end_on_collision), though this
+    environment, end_on_collision off, goes on after a contact. A recording older than the recorded
+    end_on_collision is still read from its last step, as before."""
+    path = _record(tmp_path / "runs", _chase, step_limit=13)  # the step of the contact (5.2 s) above
+    rec = read_recording(path)
+    assert _last_step_contact(rec) is True
+    assert summarize(rec)["ended_by"] == "cut_short"
+    assert rec.episode()["end_on_collision"] == "false"
+    with path.open("rb") as f:
+        reader = make_reader(f)
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        messages = list(reader.iter_messages())
+    del metadata["episode"]["end_on_collision"]
+    older = read_recording(_write(tmp_path / "older.mcap", metadata, messages))
+    assert summarize(older)["ended_by"] == "contact"
+    ended = read_recording(_record(tmp_path / "ended", _chase, end_on_collision=True))
+    assert ended.episode()["end_on_collision"] == "true" and summarize(ended)["ended_by"] == "contact"
