@@ -32,6 +32,7 @@ and output 0 ``humans_future``: ``(horizon * n_humans * 2, 1)``, ``(H, N_h, 2).r
 
 from __future__ import annotations
 
+import numbers
 from typing import TYPE_CHECKING, Final, Protocol, runtime_checkable
 
 import casadi as ca
@@ -49,6 +50,19 @@ DT: Final[float] = world.DT
 OBS_LEN: Final[int] = world.OBS_LEN
 PRED_LEN: Final[int] = 12
 SCENE_LENGTH: Final[int] = OBS_LEN + PRED_LEN  # steps of a TrajNet++ scene's primary
+
+
+def check_steps(obs_len: object, pred_len: object, what: str = "") -> None:
+    """PredictorError (``what`` first, e.g. the model) unless ``obs_len`` and ``pred_len`` are integers,
+    ``obs_len >= 2`` (a displacement needs two observed steps) and ``pred_len >= 1``: the training modules
+    took any, and failed in the first step's indexing ("index -2 is out of bounds") or in a contract check
+    that blamed the net's outputs."""
+    whole = all(isinstance(n, numbers.Integral) and not isinstance(n, bool) for n in (obs_len, pred_len))
+    if not whole or not (obs_len >= 2 and pred_len >= 1):  # type: ignore[operator]
+        raise PredictorError(
+            f"{what + ': ' if what else ''}need integers obs_len >= 2 (a displacement needs two observed "
+            f"steps) and pred_len >= 1, got obs_len={short_repr(obs_len)}, pred_len={short_repr(pred_len)}"
+        )
 
 
 @runtime_checkable

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from predictors.base import DT, OBS_LEN, PRED_LEN, ObservingPredictor, Predictor
+from predictors.base import DT, OBS_LEN, PRED_LEN, ObservingPredictor, Predictor, check_steps
 from predictors.data.trajnet_io import last_steps, scenes_of
 from predictors.data.validate import NdjsonContent, parse_ndjson
 from predictors.errors import PredictorError
@@ -36,10 +36,7 @@ class EvalConfig:
     seed: int = 0  # seeds the generator passed to ``sample``
 
     def __post_init__(self):
-        if self.obs_len < 2 or self.pred_len < 1:
-            raise PredictorError(
-                f"need obs_len >= 2 and pred_len >= 1, got {self.obs_len} and {self.pred_len}"
-            )
+        check_steps(self.obs_len, self.pred_len)
         if self.top_k is not None and self.top_k < 1:
             raise PredictorError(f"--top-k must be >= 1, got {self.top_k}")
 

@@ -26,7 +26,7 @@ import lightning as L
 import torch
 import torch.nn.functional as F
 
-from predictors.base import OBS_LEN, PRED_LEN
+from predictors.base import OBS_LEN, PRED_LEN, check_steps
 from predictors.data.windows import SceneBatch
 from predictors.errors import PredictorError
 from predictors.metrics import ade, fde
@@ -140,6 +140,7 @@ class PredictorModule(_PredictorModule):
         kind = model_kind(model)
         if kind.adversarial:
             raise PredictorError(f"model {model!r} is trained as a GAN (GANModule), not by PredictorModule")
+        check_steps(obs_len, pred_len, f"model {model!r}")
         config = kind.config(values)
         self.optim = OptimConfig(**(optim_config or {}))
         self.save_hyperparameters(
@@ -223,6 +224,7 @@ class GANModule(_PredictorModule):
         pred_len: int = PRED_LEN,
     ):
         super().__init__()
+        check_steps(obs_len, pred_len, "model 'social_gan'")
         self.save_hyperparameters()
         self.automatic_optimization = False
         config = SocialLSTMConfig.from_dict(net_config)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -340,3 +341,19 @@ def test_optim_config_stays_importable_from_training():
     from predictors import optim_config, training
 
     assert training.OptimConfig is optim_config.OptimConfig
+
+
+@pytest.mark.parametrize(
+    ("steps", "shown"),
+    [
+        ({"obs_len": 1}, "obs_len=1, pred_len=12"),  # was IndexError: index -2 is out of bounds
+        ({"pred_len": 0}, "obs_len=9, pred_len=0"),  # was the contract check blaming the net's outputs
+        ({"obs_len": "9"}, "obs_len='9', pred_len=12"),  # a YAML file's string: a bare TypeError
+    ],
+)
+def test_the_modules_refuse_too_few_steps_in_one_line_naming_them(steps, shown):
+    need = "need integers obs_len >= 2 (a displacement needs two observed steps) and pred_len >= 1"
+    with pytest.raises(PredictorError, match=rf"^model 'social_lstm': {re.escape(need)}, got {shown}$"):
+        PredictorModule("social_lstm", **steps)
+    with pytest.raises(PredictorError, match=rf"^model 'social_gan': {re.escape(need)}, got {shown}$"):
+        GANModule(generator_config().to_dict(), {}, **steps)
