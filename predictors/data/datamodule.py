@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Sequence
 from functools import partial
 from pathlib import Path
+from typing import Final
 
 import lightning as L
+import numpy as np
 import torch
 from torch.utils.data import DataLoader
 
@@ -14,6 +17,8 @@ from predictors.base import OBS_LEN, PRED_LEN
 from predictors.data.batching import BySizeBatches, check_batching
 from predictors.data.windows import EpochShuffle, TrajnetSceneDataset, collate_scenes
 from predictors.errors import DatasetFormatError, PredictorError
+
+MAX_SEED: Final[int] = 2**64  # exclusive: torch.Generator.manual_seed takes 0 .. 2**64 - 1
 
 
 class TrajnetDataModule(L.LightningDataModule):
@@ -47,6 +52,11 @@ class TrajnetDataModule(L.LightningDataModule):
             raise PredictorError(f"batch_size must be >= 1, got {batch_size}")
         if num_workers < 0:
             raise PredictorError(f"num_workers must be >= 0, got {num_workers}")
+        seed = _seed(seed)
+        # a string ("no" from a file) is true, and rotated the training scenes it was to leave alone
+        if not isinstance(augment, (bool, np.bool_)):
+            raise PredictorError(f"augment must be True or False, got {type(augment).__name__} {augment!r}")
+        augment = bool(augment)
         self.files = {"train": _paths(train_files, "train"), "val": _paths(val_files, "val")}
         self.files["test"] = _paths(test_files, "test")
         self.batch_size = batch_size
@@ -141,6 +151,18 @@ class TrajnetDataModule(L.LightningDataModule):
     def predict_dataloader(self) -> DataLoader:
         """The test scenes in order, for ``Trainer.predict`` (``_PredictorModule.predict_step``'s output)."""
         return self._loader("test", shuffle=False)
+
+
+def _seed(seed: object) -> int:
+    """``seed`` as an int, checked where it is given: it seeds the loaders' torch generators and the epochs'
+    orders and angles (``default_rng([seed, epoch])``), which took a str or a negative seed to the first
+    training batch, inside the fit, and failed there in words naming no seed ("manual_seed expected a long,
+    but got str", "expected non-negative integer"), and refused numpy's integers (torch's generator)."""
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
+        raise PredictorError(f"seed must be an int, got {type(seed).__name__} {seed!r}")
+    if not 0 <= int(seed) < MAX_SEED:
+        raise PredictorError(f"seed must be in 0..{MAX_SEED - 1} (a torch generator's range), got {seed}")
+    return int(seed)
 
 
 def _paths(files: Sequence[str | Path], split: str) -> list[str | Path]:

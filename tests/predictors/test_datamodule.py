@@ -4,6 +4,7 @@ import re
 from pathlib import Path
 
 import lightning as L
+import numpy as np
 import pytest
 import torch
 
@@ -67,6 +68,11 @@ def test_fast_dev_run_on_a_tiny_dataset(tmp_path):
         ({"train_files": Path("a.ndjson")}, "train_files is a list of paths, got the single path 'a.ndjson'"),
         ({"batch_size": "8"}, "batch_size must be an int, got str '8'"),
         ({"num_workers": 1.0}, "num_workers must be an int, got float 1.0"),
+        # these three reached the first training batch: "manual_seed expected a long, but got str",
+        # numpy's "expected non-negative integer"; "no" was true and rotated the scenes
+        ({"seed": "0"}, "seed must be an int, got str '0'"),
+        ({"seed": -1}, "seed must be in 0..18446744073709551615 (a torch generator's range), got -1"),
+        ({"augment": "no"}, "augment must be True or False, got str 'no'"),
     ],
 )
 def test_a_lone_path_or_a_count_of_another_type_is_one_line(tmp_path, change, message):
@@ -75,6 +81,18 @@ def test_a_lone_path_or_a_count_of_another_type_is_one_line(tmp_path, change, me
     given = {"train_files": [path], "val_files": [path], "test_files": [path], "batch_size": 2} | change
     with pytest.raises(PredictorError, match=re.escape(message)):
         TrajnetDataModule(**given)
+
+
+def test_a_numpy_seed_is_taken_as_the_same_int(tmp_path):
+    # torch's generator refused np.int64 ("an integer is required") at the first training batch
+    path = write_walk_file(tmp_path / "walk.ndjson")
+    batches = []
+    for seed in (np.int64(3), 3):
+        data = TrajnetDataModule([path], [path], [path], batch_size=2, seed=seed)
+        data.setup("fit")
+        batches.append(next(iter(data.train_dataloader())))
+        assert type(data.hparams["seed"]) is int
+    assert torch.equal(batches[0].positions, batches[1].positions)
 
 
 def test_training_batches_are_shuffled_and_rotated_reproducibly(tmp_path):
