@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import math
 import numbers
-from dataclasses import asdict, dataclass
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, fields
 
 from predictors.errors import PredictorError
 from predictors.nets.losses import VARIETY_ERRORS
@@ -27,6 +28,23 @@ class OptimConfig:
     # GAN: what the best-of-k loss picks and penalises per scene (nets.losses.variety_loss): "distance", the
     # sample's mean Euclidean error (every shipped GAN), or "squared", its mean squared error [Social GAN]
     variety_error: str = "distance"
+
+    @classmethod
+    def from_dict(cls, values: object) -> OptimConfig:
+        """``OptimConfig(**values)`` of a mapping of its field names (a module's ``optim_config``, a file's
+        object); anything else, or an unknown key, is a PredictorError naming it where ``OptimConfig(**x)``
+        raised a bare TypeError ("unexpected keyword argument", "argument after ** must be a mapping")."""
+        if not isinstance(values, Mapping):
+            raise PredictorError(
+                f"an optimiser config is an OptimConfig or a dict of its fields, got {type(values).__name__}"
+            )
+        known = [f.name for f in fields(cls)]
+        unknown = sorted(str(key) for key in values if key not in known)
+        if unknown:
+            raise PredictorError(
+                f"unknown optimiser config keys {unknown}; expected a subset of {sorted(known)}"
+            )
+        return cls(**values)
 
     def __post_init__(self):
         for key, value in asdict(self).items():  # "1e-3" from a YAML file met a bare TypeError below

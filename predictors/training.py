@@ -142,7 +142,7 @@ class PredictorModule(_PredictorModule):
             raise PredictorError(f"model {model!r} is trained as a GAN (GANModule), not by PredictorModule")
         check_steps(obs_len, pred_len, f"model {model!r}")
         config = kind.config(values)
-        self.optim = OptimConfig(**(optim_config or {}))
+        self.optim = OptimConfig.from_dict(optim_config or {})
         self.save_hyperparameters(
             {
                 "model": model,
@@ -233,7 +233,7 @@ class GANModule(_PredictorModule):
         self.net = SocialLSTM(config)
         check_step_contract(self.net, "model 'social_gan'", obs_len=obs_len)
         self.discriminator = Discriminator(DiscriminatorConfig(**(discriminator_config or {})))
-        self.optim = OptimConfig(**optim_config)
+        self.optim = OptimConfig.from_dict(optim_config)
         self.obs_len = obs_len
         self.pred_len = pred_len
 
@@ -339,10 +339,14 @@ class GANModule(_PredictorModule):
         return [opt_g, opt_d], schedulers
 
 
-def make_module(model: str, net_config: Any, optim: OptimConfig) -> PredictorModule | GANModule:
+def make_module(
+    model: str, net_config: Any, optim: OptimConfig | Mapping[str, Any] | None
+) -> PredictorModule | GANModule:
     """The LightningModule of a ``--model`` choice: ``net_config`` is the kind's config instance, or a dict
-    of values over its defaults (None: the defaults); GAN training for adversarial kinds."""
+    of values over its defaults (None: the defaults), and so is ``optim`` of ``OptimConfig``'s; GAN training
+    for adversarial kinds."""
     kind = model_kind(model)
+    optim = optim if isinstance(optim, OptimConfig) else OptimConfig.from_dict({} if optim is None else optim)
     if isinstance(net_config, kind.config_class):
         config = net_config
     elif net_config is None or isinstance(net_config, Mapping):

@@ -357,3 +357,24 @@ def test_the_modules_refuse_too_few_steps_in_one_line_naming_them(steps, shown):
         PredictorModule("social_lstm", **steps)
     with pytest.raises(PredictorError, match=rf"^model 'social_gan': {re.escape(need)}, got {shown}$"):
         GANModule(generator_config().to_dict(), {}, **steps)
+
+
+def test_an_optimiser_config_of_values_is_taken_or_refused_in_one_line():
+    # make_module took an OptimConfig only: a dict or None met asdict()'s bare TypeError, and a module's
+    # optim_config with a misspelt key OptimConfig's "unexpected keyword argument"
+    module = make_module("social_lstm", None, {"lr": 5e-4})
+    assert module.optim == OptimConfig(lr=5e-4)
+    assert make_module("social_lstm", None, None).optim == OptimConfig()
+    unknown = (
+        r"^unknown optimiser config keys \['learning_rate'\]; expected a subset of \['adversarial_weight', "
+    )
+    with pytest.raises(PredictorError, match=unknown):
+        make_module("social_lstm", None, {"learning_rate": 1e-3})
+    with pytest.raises(PredictorError, match=unknown):
+        PredictorModule("social_lstm", optim_config={"learning_rate": 1e-3})
+    with pytest.raises(PredictorError, match=unknown):
+        GANModule(generator_config().to_dict(), {"learning_rate": 1e-3})
+    with pytest.raises(
+        PredictorError, match="^an optimiser config is an OptimConfig or a dict of its fields"
+    ):
+        make_module("social_lstm", None, [("lr", 1e-3)])  # type: ignore[arg-type]
