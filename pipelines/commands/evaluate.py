@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Final
 
 from pipelines.commands import check_data_files, check_writable, path_arg, write_output
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
+from pipelines.commands.train_data import DATASET_SUFFIX, DEFAULT_DATASET, DEFAULT_PROTOCOL, PROTOCOLS
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
 
@@ -99,7 +100,10 @@ def register(subparsers) -> None:
     )
     # defaults filled in by _choose_files: None tells an option typed from its default, which --test refuses
     parser.add_argument(
-        "--dataset", default=None, choices=("biwi_eth", "biwi_hotel"), help="test sequence (default biwi_eth)"
+        "--dataset",
+        default=None,
+        choices=tuple(DATASET_SUFFIX),
+        help=f"test sequence (default {DEFAULT_DATASET})",
     )
     parser.add_argument(
         "--split", default=None, choices=("train", "val", "test"), help="split to score (default test)"
@@ -107,8 +111,8 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--protocol",
         default=None,
-        choices=("paper", "loo"),
-        help="which files form the split (default paper)",
+        choices=PROTOCOLS,
+        help=f"which files form the split (default {DEFAULT_PROTOCOL})",
     )
     parser.add_argument(
         "--test",
@@ -217,8 +221,8 @@ def _choose_files(args: argparse.Namespace) -> None:
     chooses prepared files is typed with --test: it would be ignored without a word."""
     choosing = (("--data-dir", args.data_dir), ("--protocol", args.protocol), ("--dataset", args.dataset))
     if args.test is None:
-        args.protocol = args.protocol or "paper"
-        args.dataset = args.dataset or "biwi_eth"
+        args.protocol = args.protocol or DEFAULT_PROTOCOL
+        args.dataset = args.dataset or DEFAULT_DATASET
         args.split = args.split or "test"
         return
     given = [option for option, value in (*choosing, ("--split", args.split)) if value is not None]

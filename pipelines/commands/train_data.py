@@ -13,6 +13,9 @@ from typing import Any, Final
 from pipelines.commands import check_data_files, path_arg
 from pipelines.errors import PipelineError
 
+# The protocols and test sequences of the commands' options (train, evaluate, zoo add), written here rather
+# than imported from predictors.data.locate, whose numpy and trajnetplusplustools cost a parser 3 s; the same
+# as locate's (tests/pipelines/test_protocol_names.py).
 DATASET_SUFFIX: Final[dict[str, str]] = {"biwi_eth": "eth", "biwi_hotel": "hotel"}
 DEFAULT_PROTOCOL, DEFAULT_DATASET = "paper", "biwi_eth"
 PROTOCOLS: Final[tuple[str, ...]] = ("paper", "loo")

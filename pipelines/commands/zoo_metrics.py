@@ -8,6 +8,7 @@ import hashlib
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from pipelines.commands.train_data import PROTOCOLS
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
@@ -15,7 +16,7 @@ if TYPE_CHECKING:
 
 # The protocols whose files TrajNet++'s ETH split fixes: a run recorded under one of them cannot be labelled
 # another, nor can a run on other files take their name (its figures would sit among theirs in `zoo list`).
-TRAJNET_PROTOCOLS = ("paper", "loo")
+TRAJNET_PROTOCOLS = PROTOCOLS
 CONFIG_WHAT = "crowdmpc predictor config"
 
 
