@@ -79,6 +79,12 @@ class _PredictorModule(L.LightningModule):
         """The loss and metrics of ``batch``; each subclass defines it."""
         raise NotImplementedError
 
+    @property
+    def trained_loss(self) -> str:
+        """The loss ``model_step`` trains on, as a checkpoint's ``training.optim.loss`` records it; each
+        subclass defines it."""
+        raise NotImplementedError
+
     def validation_step(self, batch: SceneBatch, batch_idx: int) -> None:
         self._log_eval(self.model_step(batch, "val"), "val", len(batch))
 
@@ -175,6 +181,12 @@ class PredictorModule(_PredictorModule):
     def predicted_positions(self, batch: SceneBatch) -> torch.Tensor:
         return self.rollout(batch.positions, batch.mask, teacher_forcing=False)[1]
 
+    @property
+    def trained_loss(self) -> str:
+        """The NLL ("gaussian") where it is asked of a net with a Gaussian head, else "l2" on the mean
+        steps: a point head has no sigmas to score."""
+        return "gaussian" if self.optim.loss == "gaussian" and self.net.head_type == "gaussian" else "l2"
+
     def model_step(self, batch: SceneBatch, stage: str) -> dict[str, torch.Tensor]:
         positions = batch.positions
         outputs, predicted = self.rollout(positions, batch.mask, teacher_forcing=stage == "train")
@@ -183,7 +195,7 @@ class PredictorModule(_PredictorModule):
         previous = torch.cat([positions[:, self.obs_len - 1 : self.obs_len, 0], truth[:, :-1]], dim=1)
         target = truth - previous
         primary = outputs[:, :, 0]
-        if self.optim.loss == "gaussian" and self.net.head_type == "gaussian":
+        if self.trained_loss == "gaussian":
             loss = gaussian_nll(primary, target, valid)
         else:
             loss = l2_loss(primary[..., :2], target, valid)
@@ -261,6 +273,10 @@ class GANModule(_PredictorModule):
             batch.positions, batch.mask, self.obs_len, self.pred_len, teacher_forcing=False, noise=noise
         )
         return predicted
+
+    @property
+    def trained_loss(self) -> str:
+        return "variety+adversarial"  # whatever OptimConfig.loss says
 
     def _trajectory(self, batch: SceneBatch, future: torch.Tensor) -> torch.Tensor:
         return torch.cat([batch.positions[:, : self.obs_len, 0], future], dim=1)

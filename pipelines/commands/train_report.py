@@ -1,5 +1,5 @@
-"""What ``crowdmpc train`` records and prints once a run has trained: the training data's identity, the loss
-the module trained on, the TrajNet++ metrics of the best epoch, the epoch times, the closing lines."""
+"""What ``crowdmpc train`` records and prints once a run has trained: the training data's identity, the
+TrajNet++ metrics of the best epoch, the epoch times, the closing lines."""
 
 from __future__ import annotations
 
@@ -58,16 +58,6 @@ def finished_outputs(out: Path) -> list[str]:
         return []
     names = [p.name for p in out.iterdir() if p.is_file() and not p.name.startswith(".")]
     return sorted(n for n in names if n.endswith((".pt", ".metrics.json")))
-
-
-def trained_loss(module: Any, asked: str) -> str:
-    """The loss the module trained on: the Gaussian NLL needs a Gaussian head (PredictorModule.model_step
-    falls back to L2 on the mean steps), and the GAN has its own."""
-    from predictors.training import GANModule
-
-    if isinstance(module, GANModule):
-        return "variety+adversarial"
-    return asked if getattr(module.net, "head_type", None) == "gaussian" else "l2"
 
 
 def evaluate_splits(

@@ -24,7 +24,6 @@ def save_best(
     import tempfile
 
     from pipelines.commands.train_checkpoint import check_saved_predicts
-    from pipelines.commands.train_report import trained_loss
     from predictors.base import OBS_LEN
     from predictors.checkpoint import save_checkpoint
     from predictors.durable import replace_durably, sync_folder
@@ -39,7 +38,7 @@ def save_best(
             "pred_len": module.pred_len,  # steps it learned to predict: a longer MPC horizon extrapolates
             # only when set: a checkpoint trained on every batch, every epoch, reads as before
             **ended,
-            "optim": {**optim.__dict__, "loss": trained_loss(module, optim.loss)},
+            "optim": {**optim.__dict__, "loss": module.trained_loss},
         }
     }
     _remove_killed_staging(out, name)

@@ -603,13 +603,13 @@ def test_the_recorded_loss_is_the_one_trained(trained):
     checkpoint says so; soft-pooling Social-LSTM has a Gaussian head and keeps it."""
     out, _ = trained
     assert json.loads((out / "walker.json").read_text())["training"]["optim"]["loss"] == "gaussian"
-    from pipelines.commands.train_report import trained_loss
     from predictors.optim_config import OptimConfig
     from predictors.training import make_module
 
-    point = make_module("social_lstm", {"head": "point"}, OptimConfig())
-    assert trained_loss(point, "gaussian") == "l2"
-    assert trained_loss(make_module("social_gan", None, OptimConfig()), "gaussian") == "variety+adversarial"
+    assert make_module("social_lstm", {"head": "point"}, OptimConfig()).trained_loss == "l2"
+    assert make_module("social_lstm", None, OptimConfig(loss="l2")).trained_loss == "l2"
+    assert make_module("social_lstm", None, OptimConfig()).trained_loss == "gaussian"
+    assert make_module("social_gan", None, OptimConfig()).trained_loss == "variety+adversarial"
 
 
 def test_a_loss_the_net_does_not_train_on_is_refused_and_the_default_follows_its_head(tmp_path, capsys):
