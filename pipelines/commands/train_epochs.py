@@ -14,6 +14,7 @@ from pipelines.commands import replace_file
 from pipelines.commands.train_resume import SETTINGS_FILE, early_stopping_state
 from pipelines.errors import PipelineError
 from predictors.checkpoint import load_tensors
+from predictors.text_table import counted
 
 DEFAULT_EPOCHS: Final[int] = 25
 
@@ -104,7 +105,7 @@ def check_more_epochs(out: Path, epochs: int, done: int | None, metrics: Path) -
         return
     if done is not None and (epochs < done or (epochs == done and finished)):
         raise PipelineError(
-            f"--resume: {out} has trained {done} epoch{'s' if done != 1 else ''} already; --epochs {epochs} "
+            f"--resume: {out} has trained {counted(done, 'epoch')} already; --epochs {epochs} "
             f"would train none (give more than {done} to continue it)"
         )
 

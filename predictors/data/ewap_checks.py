@@ -16,6 +16,7 @@ from typing import Final
 import numpy as np
 
 from predictors.errors import DatasetFormatError
+from predictors.text_table import counted
 
 STEP_SECONDS: Final[float] = 0.4  # 2.5 fps, what the converter writes into every scene
 # The estimate of a 0.4 s file lands within 1 % of it; a 10 Hz file gives 0.1 s, a 1 Hz one 1 s.
@@ -82,7 +83,7 @@ def fast_steps_note(path: Path, rows: np.ndarray, frame_step: int) -> str | None
     first = fast[np.argmin(rows[a[fast], 0])]
     i, j = a[first], b[first]
     return (
-        f"note: {path}: {fast.size} step{'s' * (fast.size != 1)} of a pedestrian faster than "
+        f"note: {path}: {counted(int(fast.size), 'step')} of a pedestrian faster than "
         f"{MAX_SPEED:g} m/s (e.g. pedestrian {rows[i, 1]:.0f}, frames {rows[i, 0] + 1:.0f} to "
         f"{rows[j, 0] + 1:.0f}: {metres[first]:.1f} m in {seconds[first]:.1f} s); an id reused by another "
         "person, or a tracker jump? The scenes keep them as they are"

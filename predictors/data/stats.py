@@ -12,7 +12,7 @@ import numpy as np
 from predictors.data.trajnet_io import shown_scenes
 from predictors.data.validate import parse_ndjson
 from predictors.errors import DatasetFormatError, PredictorError
-from predictors.text_table import aligned_lines
+from predictors.text_table import aligned_lines, counted
 
 
 @dataclass(frozen=True)
@@ -122,7 +122,7 @@ def stats_report(path: str | Path) -> tuple[str, list[str]]:
 def repeated_notes(stats: list[FileStats]) -> list[str]:
     """A note for each file with repeated track rows, which the tracks column counts once."""
     return [
-        f"note: {s.path}: {s.repeated} track row{'s' * (s.repeated != 1)} "
+        f"note: {s.path}: {counted(s.repeated, 'track row')} "
         f"repeat{'s' * (s.repeated == 1)} an earlier one (same "
         "pedestrian and frame); counted once"
         for s in stats
@@ -134,7 +134,7 @@ def tag_notes(stats: list[FileStats]) -> list[str]:
     """What the types column leaves out: a note for each file with tags that are no TrajNet++ type (a
     hand-made or foreign file; they were counted nowhere, unsaid), and one for the untagged scenes of all."""
     notes = [
-        f"note: {s.path}: {s.odd_tags} scene{'s' * (s.odd_tags != 1)} tagged with no TrajNet++ type "
+        f"note: {s.path}: {counted(s.odd_tags, 'scene')} tagged with no TrajNet++ type "
         f"(an integer 1-4), e.g. {s.odd_example}: left out of the types column"
         for s in stats
         if s.odd_tags
@@ -147,7 +147,7 @@ def tag_notes(stats: list[FileStats]) -> list[str]:
         n = sum(s.untagged for s in files)
         where = str(files[0].path) if len(files) == 1 else f"{len(files)} files"
         notes.append(
-            f"note: {n} scene{'s' * (n != 1)} in {where} {'are' if n != 1 else 'is'} untagged ({cause}): "
+            f"note: {counted(n, 'scene')} in {where} {'are' if n != 1 else 'is'} untagged ({cause}): "
             "left out of the types column"
         )
     return notes
