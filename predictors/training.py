@@ -1,12 +1,13 @@
 """Thin LightningModules around ``predictors.nets``: loss, optimiser, logging (STYLE.md example 6).
 
-Only this module and ``pipelines`` import Lightning. ``PredictorModule`` trains any net that keeps the step
-contract (``nets.contract``) of any registered model kind (``predictors.models``); ``GANModule`` the
-adversarial ones; ``make_module`` picks. Both share one ``model_step(batch, stage)`` for train/val/test.
-Training follows TrajNet++ (``lstm/trainer.py``): Adam (lr 1e-3, weight decay 1e-4), StepLR,
-neighbours teacher-forced and only the primary fed its own (detached) predictions, loss on the primary's 12
-predicted displacements. Validation and test predict every agent recursively, as ``crowdmpc evaluate`` does,
-and log the primary's ADE/FDE (``val_ade`` selects the best checkpoint).
+Only this module, ``predictors.data.datamodule`` and ``pipelines`` import Lightning. ``PredictorModule``
+trains any net that keeps the step contract (``nets.contract``) of any registered model kind
+(``predictors.models``); ``GANModule`` the adversarial ones; ``make_module`` picks. Both share one
+``model_step(batch, stage)`` for train/val/test. Training follows TrajNet++ (``lstm/trainer.py``): Adam
+(lr 1e-3, weight decay 1e-4), StepLR, neighbours teacher-forced and only the primary fed its own (detached)
+predictions, loss on the primary's 12 predicted displacements. Validation and test predict every agent
+recursively, as ``crowdmpc evaluate`` does, and log the primary's ADE/FDE (``val_ade`` selects the best
+checkpoint).
 
 Their optimiser's settings are ``OptimConfig`` (``predictors.optim_config``, exported here too).
 
