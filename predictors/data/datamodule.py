@@ -15,7 +15,7 @@ from torch.utils.data import DataLoader
 
 from predictors.base import OBS_LEN, PRED_LEN
 from predictors.data.batching import BySizeBatches, check_batching
-from predictors.data.windows import EpochShuffle, TrajnetSceneDataset, collate_scenes
+from predictors.data.windows import EpochShuffle, TrajnetSceneDataset, collate_scenes, path_list
 from predictors.errors import DatasetFormatError, PredictorError
 
 MAX_SEED: Final[int] = 2**64  # exclusive: torch.Generator.manual_seed takes 0 .. 2**64 - 1
@@ -57,8 +57,10 @@ class TrajnetDataModule(L.LightningDataModule):
         if not isinstance(augment, (bool, np.bool_)):
             raise PredictorError(f"augment must be True or False, got {type(augment).__name__} {augment!r}")
         augment = bool(augment)
-        self.files = {"train": _paths(train_files, "train"), "val": _paths(val_files, "val")}
-        self.files["test"] = _paths(test_files, "test")
+        self.files = {
+            split: path_list(files, f"{split}_files")
+            for split, files in (("train", train_files), ("val", val_files), ("test", test_files))
+        }
         self.batch_size = batch_size
         self.augment = augment
         self.seed = seed
@@ -163,13 +165,3 @@ def _seed(seed: object) -> int:
     if not 0 <= int(seed) < MAX_SEED:
         raise PredictorError(f"seed must be in 0..{MAX_SEED - 1} (a torch generator's range), got {seed}")
     return int(seed)
-
-
-def _paths(files: Sequence[str | Path], split: str) -> list[str | Path]:
-    """``files`` as a list; one path given alone is refused in one line, since a str is a sequence of its
-    letters, which were read as files ("/: is a directory, not a data file")."""
-    if isinstance(files, (str, Path)):
-        raise PredictorError(
-            f"{split}_files is a list of paths, got the single path {str(files)!r}: write [path]"
-        )
-    return list(files)

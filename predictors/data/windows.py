@@ -20,7 +20,7 @@ import math
 import os
 import zipfile
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final, Literal, get_args
@@ -265,6 +265,15 @@ def normalise(xy: np.ndarray, obs_len: int, angle: float | None, *, where: str |
     return SceneSample(positions, mask, origin, rotation)
 
 
+def path_list(files: Iterable[str | Path], what: str) -> list[str | Path]:
+    """``files`` as a list; one path given alone (``what``: the argument, e.g. "train_files") is refused in
+    one line, since a str is a sequence of its letters, which were read as files ("/: is a directory, not a
+    data file"), and a Path is no sequence at all."""
+    if isinstance(files, (str, Path)):
+        raise PredictorError(f"{what} is a list of paths, got the single path {str(files)!r}: write [path]")
+    return list(files)
+
+
 class TrajnetSceneDataset(Dataset):
     """Scenes of one or more TrajNet++ files as normalised ``SceneSample``s.
 
@@ -291,9 +300,9 @@ class TrajnetSceneDataset(Dataset):
                 f"need obs_len >= 2, pred_len >= 1 and obs_len + pred_len <= {scene_length}, "
                 f"got obs_len={obs_len}, pred_len={pred_len}"
             )
-        if not files:
+        self.files = [Path(f) for f in path_list(files, "files")]
+        if not self.files:
             raise PredictorError("a scene dataset needs at least one file")
-        self.files = [Path(f) for f in files]
         self.obs_len = obs_len
         self.pred_len = pred_len
         self.augment = augment

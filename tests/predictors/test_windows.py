@@ -334,3 +334,15 @@ def test_a_cache_entry_write_interrupted_leaves_no_temporary(tmp_path, monkeypat
     with pytest.raises(KeyboardInterrupt):
         load_file_arrays(path)
     assert list((tmp_path / "cache" / "scenes").iterdir()) == []
+
+
+@pytest.mark.parametrize("given", [str, lambda path: path])
+def test_a_lone_path_given_to_the_dataset_is_one_line(tmp_path, given):
+    # a str was read letter by letter ("/: is a directory, not a data file"), a Path met "'PosixPath' object
+    # is not iterable"; TrajnetDataModule refused both for itself, the dataset it builds did not
+    path = write_walk_file(tmp_path / "walk.ndjson")
+    with pytest.raises(
+        PredictorError, match=r"^files is a list of paths, got the single path '.*walk\.ndjson'"
+    ):
+        TrajnetSceneDataset(given(path))
+    assert len(TrajnetSceneDataset([given(path)])) == len(TrajnetSceneDataset([path]))
