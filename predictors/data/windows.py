@@ -29,7 +29,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, Sampler
 
-from predictors.base import DT, OBS_LEN, PRED_LEN, SCENE_LENGTH
+from predictors.base import DT, OBS_LEN, PRED_LEN, SCENE_LENGTH, check_steps
 from predictors.data.locate import cache_root
 from predictors.data.trajnet_io import last_steps, shown_scenes
 from predictors.data.validate import NdjsonContent, parse_ndjson, read_error, require_file
@@ -295,9 +295,10 @@ class TrajnetSceneDataset(Dataset):
         scene_length: int = SCENE_LENGTH,
         window: Window = "whole",
     ):
-        if obs_len < 2 or pred_len < 1 or obs_len + pred_len > scene_length:
+        check_steps(obs_len, pred_len, "a scene dataset")
+        if obs_len + pred_len > scene_length:
             raise PredictorError(
-                f"need obs_len >= 2, pred_len >= 1 and obs_len + pred_len <= {scene_length}, "
+                f"a scene dataset: need obs_len + pred_len <= {scene_length} (the scenes' steps), "
                 f"got obs_len={obs_len}, pred_len={pred_len}"
             )
         self.files = [Path(f) for f in path_list(files, "files")]

@@ -134,8 +134,11 @@ def test_obs_and_pred_lengths_take_the_end_of_the_scene(tmp_path):
     with pytest.raises(PredictorError, match="obs_len"):
         TrajnetSceneDataset([tmp_path / "walk.ndjson"], obs_len=10, pred_len=12)
     # one observed step gives no velocity: every predictor needs two
-    with pytest.raises(PredictorError, match="need obs_len >= 2"):
+    with pytest.raises(PredictorError, match="^a scene dataset: need integers obs_len >= 2"):
         TrajnetSceneDataset([tmp_path / "walk.ndjson"], obs_len=1, pred_len=12)
+    # a YAML file's "9" met a bare TypeError ("'<' not supported between instances of 'str' and 'int'")
+    with pytest.raises(PredictorError, match=r"^a scene dataset: .*got obs_len='9', pred_len=12$"):
+        TrajnetSceneDataset([tmp_path / "walk.ndjson"], obs_len="9")  # type: ignore[arg-type]
 
 
 def test_file_arrays_are_cached_in_memory_and_on_disk(tmp_path, monkeypatch):
