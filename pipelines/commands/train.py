@@ -184,8 +184,8 @@ def _optimisation_options(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="N",
         help="train and validate on the first N batches of each epoch (Lightning's limit_train_batches and "
-        "limit_val_batches): a quick check that a net trains; the checkpoint records it (default: all)"
-        + RESUMED,
+        "limit_val_batches): a quick check that a net trains; the checkpoint records it where it cut an "
+        "epoch's batches (default: all)" + RESUMED,
     )
     parser.add_argument(
         "--patience",
