@@ -10,7 +10,9 @@ import textwrap
 from collections.abc import Mapping, Sequence
 from typing import Final
 
+from crowdsim.world import PAPER_ROBOTS
 from pipelines.experiments.tasks import Cell
+from predictors.text_table import counted
 
 # Colours past matplotlib's ten (C0..C9): tab20b's, then tab20c's, darkest shades first, so that each of up
 # to 50 methods has its own (the safety experiment's 16 repeated six of C0..C9, told apart by marker alone).
@@ -79,8 +81,9 @@ def wrap_title(title: str, width: int) -> str:
 def settings_line(cells: Sequence[Cell]) -> str:
     """What every plotted cell shares that changes its figures and neither the methods' labels nor the
     experiment's title say (table.md's notes do): the predictor, the margins, a profile or visibility other
-    than the paper's, Table I's values replaced (``--set mpc.KEY``). A Table II plot of constant velocity at
-    d_min 1.0 was titled as the paper's Table II. Empty where there is nothing to say."""
+    than the paper's, a team other than the paper's, Table I's values replaced (``--set mpc.KEY``). A Table
+    II plot of constant velocity at d_min 1.0 was titled as the paper's Table II, and so was one of two
+    robots (``--robots 2``). Empty where there is nothing to say."""
     predicting = [c for c in cells if c.spec.kind.uses_predictor]
     parts = []
     for what, values in (
@@ -93,6 +96,9 @@ def settings_line(cells: Sequence[Cell]) -> str:
         worlds = {getattr(c.world, name) for c in cells}
         if len(worlds) == 1 and (value := worlds.pop()) != paper:
             parts.append(f"{name} {value}")
+    teams = {c.n_robots for c in cells}  # several: the plots go against them, or label their columns
+    if len(teams) == 1 and (team := teams.pop()) != PAPER_ROBOTS:
+        parts.append(counted(team, "robot"))
     shared = set.intersection(*(set(c.spec.mpc_overrides) for c in predicting)) if predicting else set()
     shown = sorted((key, value) for key, value in shared if key != "jit")  # jit changes no figure
     if shown:

@@ -153,3 +153,21 @@ def test_a_travel_panel_without_any_pair_keeps_its_zero_line_on_a_scale_of_secon
     assert "none completed by both" in [t.get_text() for t in travel.texts]
     for ax in fig.axes[:-1]:  # the rates' panels keep their points' scale
         assert ax.get_ylim()[0] < -5.0
+
+
+def test_a_title_names_a_team_other_than_the_papers():
+    """Table II of two robots (--robots 2) was titled as the paper's, of three: its plots showed no paper
+    squares and said nothing of why; table.md said "Robots: 2 per episode". One robot reads "1 robot"; the
+    paper's three, or teams that vary (plotted against them), add nothing."""
+    table2 = configured_experiment(load(sets=["sweep.experiment=table2"]))
+    for team, words in ((2, "; 2 robots"), (1, "; 1 robot"), (3, "")):
+        cells = table2.cells((5, 6), n_robots=team)
+        summaries = summarize(table2, cells, [_record(c, i, 1.0, 20) for c in cells for i in range(2)])
+        line = f"predictor social_lstm_eth; margins none{words}"
+        assert outcome_figure(table2, summaries, TRAVEL).axes[0].get_title().split("\n")[1] == line
+        assert safety_tradeoff_figure(table2, summaries).get_suptitle().split("\n")[1] == line
+    teams = configured_experiment(load(sets=["sweep.experiment=table2", 'sweep.vary="scenario.robots=2,4"']))
+    cells = teams.cells((5,))
+    summaries = summarize(teams, cells, [_record(c, i, 1.0, 20) for c in cells for i in range(2)])
+    title = outcome_figure(teams, summaries, TRAVEL).axes[0].get_title().split("\n")
+    assert title[1] == "predictor social_lstm_eth; margins none"
