@@ -15,6 +15,7 @@ from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_p
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
 from pipelines.whole_files import save_figure
+from predictors.text_table import counted
 
 if TYPE_CHECKING:
     from pipelines.experiments.compare import Identity, Run
@@ -48,6 +49,7 @@ change that must not move a result (`--jit on` against off, a refactoring).
 """
 MAX_SETTINGS_SHOWN: Final = 12  # per run; the rest counted (--json has them all)
 VALUE_WIDTH: Final = 60  # characters of a setting's values shown
+MAX_CELLS_NAMED: Final = 2  # per run, in the line saying that runs share no cell
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -169,9 +171,15 @@ def _compare(args: argparse.Namespace) -> int:
 
 def _nothing_shared(runs: list[Run]) -> str:
     """Why ``runs`` share no episode: their methods' labels where the crowds are shared (a --vary column is
-    labelled with its value, "CMPC orca.time_horizon=5.0", and was said to draw other crowds), else the
-    crowds."""
+    labelled with its value, "CMPC orca.time_horizon=5.0", and was said to draw other crowds), or with
+    --by-cell their cells (the labels, "CMPC" in both runs, read as if shared), else the crowds."""
     crowds = [{identity[1:] for identity in run.outcomes} for run in runs]
+    if set.intersection(*crowds) and all(run.cells for run in runs):
+        cells = "; ".join(f"{run.label}: {_some(set(run.cells.values()), 'cell')}" for run in runs)
+        return (
+            "the runs share no cell on the same crowds (--by-cell pairs sweeps' episodes by their cell's "
+            f"key, which names its predictor, margins and settings; without it they pair by method): {cells}"
+        )
     if set.intersection(*crowds):
         methods = "; ".join(f"{run.label}: {', '.join(sorted(set(run.methods.values())))}" for run in runs)
         return (
@@ -182,6 +190,14 @@ def _nothing_shared(runs: list[Run]) -> str:
         "the runs share no episode (the same method, humans, robots, scenario, seed and crowd: another "
         "crowd, profile, team or formation draws other people from the same seeds)"
     )
+
+
+def _some(names: set[str], noun: str, most: int = MAX_CELLS_NAMED) -> str:
+    """The first ``most`` of ``names`` (sorted), then how many more: a sweep's keys are long, and Table II
+    has ten."""
+    shown = sorted(names)
+    more = f" and {counted(len(shown) - most, f'more {noun}')}" if len(shown) > most else ""
+    return ", ".join(shown[:most]) + more
 
 
 def _report(runs: list[Run], shared: list[Identity]) -> dict[str, Any]:

@@ -68,6 +68,8 @@ class Run:
     path: Path
     outcomes: dict[Identity, Outcome] = field(default_factory=dict)
     methods: dict[Group, str] = field(default_factory=dict)  # each group's method as this run spells it
+    # with --by-cell, each group's cell key as this run spells it (its group holds it case folded)
+    cells: dict[Group, str] = field(default_factory=dict)
     # per group, each dotted setting -> the values its episodes ran with
     settings: dict[Group, dict[str, set[str]]] = field(default_factory=dict)
     # per group, the [mpc] keys some of its episodes' controller does not read (pipelines.loop.unread)
@@ -141,6 +143,8 @@ def load_run(label: str, path: Path, progress: bool | None = False, by_cell: boo
             )
         run.outcomes[identity] = _outcome(record, kinds)
         run.methods.setdefault(identity[:3], str(record["method"]))
+        if by_cell:
+            run.cells.setdefault(identity[:3], str(record["cell"]))
         ran = {"config": _with_unrecorded(record.get("config")), **_run_fields(record)}
         text = json.dumps(ran, sort_keys=True)
         if (identity[:3], text) in configs:  # a cell's episodes share their settings: flattened once

@@ -187,6 +187,29 @@ def test_by_cell_pairs_sweeps_columns_of_one_cell_whatever_their_labels(tmp_path
     )
 
 
+def test_by_cell_says_which_cells_the_runs_hold_where_they_share_none(tmp_path, capsys):
+    """Table II with the paper's predictor and with constant velocity, --by-cell: "the runs share no method
+    on the same crowds (...): a: CMPC; b: CMPC", as if the two shared their one method. The cells, each
+    run's as it spells them, the first two named and the rest counted."""
+    a = _sweep(tmp_path / "a", [_record(i, *o, humans=h) for h in (5, 6, 7) for i, o in enumerate(BASE)])
+    lstm = [_record(i, *o, humans=7) for i, o in enumerate(BASE)]
+    b = _sweep(
+        tmp_path / "b",
+        [
+            {**r, **{k: r[k].replace("constant_velocity", "social_lstm_eth") for k in ("cell", "key")}}
+            for r in lstm
+        ],
+    )
+    assert main(["compare", str(a), str(b), "--by-cell"]) == 2
+    cell = "cmpc-{}-F-ibr-m=none-paper-visible-h{}-r3"
+    assert one_line_err(capsys).endswith(
+        "the runs share no cell on the same crowds (--by-cell pairs sweeps' episodes by their cell's key, "
+        "which names its predictor, margins and settings; without it they pair by method): "
+        f"a: {cell.format('constant_velocity', 5)}, {cell.format('constant_velocity', 6)} and 1 more cell; "
+        f"b: {cell.format('social_lstm_eth', 7)}\n"
+    )
+
+
 @pytest.mark.parametrize("by_cell", [[], ["--by-cell"]])
 def test_a_sweeps_methods_are_listed_in_its_plans_order(tmp_path, capsys, by_cell):
     """`--vary mpc.d_min=0.6,0.65,0.7` run by parallel workers logs 0.65's episodes first: the table and the
