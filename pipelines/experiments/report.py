@@ -115,7 +115,7 @@ def _added_flag_columns(s: CellSummary) -> dict[str, Any]:
     field."""
     columns: dict[str, Any] = {}
     for name, count in s.added_flag_counts.items():
-        rate = None if count is None else Rate(count, s.episodes)
+        rate = s.added_rate(name)
         lo, hi = (None, None) if rate is None else rate.interval
         percent = None if rate is None else rate.percent
         columns |= {f"{name}_count": count, f"{name}_rate": percent, f"{name}_ci_lo": lo, f"{name}_ci_hi": hi}

@@ -135,8 +135,7 @@ def _rate(s: CellSummary, name: str) -> Rate | None:
     if name not in ADDED_FLAGS:
         rate: Rate = getattr(s, name)
         return rate
-    count = s.added_flag_counts.get(name)
-    return None if count is None else Rate(count, s.episodes)
+    return s.added_rate(name)
 
 
 def _paper(cells: Sequence[CellSummary], name: str) -> list[float | None]:

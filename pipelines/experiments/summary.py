@@ -100,6 +100,13 @@ class CellSummary:
     calibrations: tuple[str, ...]  # where calibrated margins came from (cell_columns.calibration_texts)
     paper: PaperFigures | None
 
+    def added_rate(self, name: str) -> Rate | None:
+        """The rate of flag ``name`` added after the first records (crowdsim.metrics.ADDED_FLAGS) over the
+        cell's episodes; None when some record of the cell predates it (table.md's "—", cells.csv's empty
+        columns, the plots' "not recorded")."""
+        count = self.added_flag_counts.get(name)
+        return None if count is None else Rate(count, self.episodes)
+
     @property
     def paper_row(self) -> dict[str, float | None]:
         return (

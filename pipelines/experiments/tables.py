@@ -88,8 +88,8 @@ def _rate_cell(r: Rate) -> str:
 def _added_rate_cell(s: CellSummary, name: str) -> str:
     """A rate of a flag added after the first records (crowdsim.metrics.ADDED_FLAGS), as ``_rate_cell``;
     "—" when some record of the cell predates it."""
-    count = s.added_flag_counts.get(name)
-    return "—" if count is None else _rate_cell(Rate(count, s.episodes))
+    rate = s.added_rate(name)
+    return "—" if rate is None else _rate_cell(rate)
 
 
 def _best(values: Sequence[float], higher_is_better: bool) -> set[int]:
