@@ -15,7 +15,7 @@ pairs with the same method's of another whatever else the two changed (margins, 
 comparison is what the runs differ in, listed beside it (``settings_differ``); or, for sweeps by cell
 (``--by-cell``), its cell's, whatever the column's label. Only episodes every run holds are compared.
 
-The paired counts are the exact McNemar test's discordant pairs (pipelines.experiments.tables): episodes where
+The paired counts are the exact McNemar test's discordant pairs (pipelines.experiments.paired): episodes where
 the run has the outcome and the first run not, and the reverse. The difference of the two rates has Newcombe's
 square-and-add 95 % interval for paired proportions (pipelines.experiments.paired), which unlike the normal
 approximation stays inside [-100, 100] % and is not of zero width at 0 of n. Travel time is compared on the

@@ -1,19 +1,52 @@
-"""One run against the first on the episodes both hold (``crowdmpc compare``, pipelines.experiments.compare):
-each episode's ``Outcome``, the paired counts of each flag with the exact McNemar test and Newcombe's
-interval (``Paired``, ``paired_interval``), and the travel time's paired difference (``versus``); one run's
-own rates (``side``). The statistics are described in pipelines.experiments.compare's docstring."""
+"""Paired comparisons: the exact McNemar test and how its p-value is printed (``mcnemar_exact``, ``p_text``),
+which table.md's paired successes (pipelines.experiments.tables) and ``crowdmpc compare`` share; and one run
+against the first on the episodes both hold (``crowdmpc compare``, pipelines.experiments.compare): each
+episode's ``Outcome``, the paired counts of each flag with the McNemar test and Newcombe's interval
+(``Paired``, ``paired_interval``), and the travel time's paired difference (``versus``); one run's own rates
+(``side``). The statistics are described in pipelines.experiments.compare's docstring."""
 
 from __future__ import annotations
 
 import math
+import operator
 import statistics
 from dataclasses import dataclass
 from typing import Final
 
 from pipelines.experiments.summary import t95, wilson_interval
-from pipelines.experiments.tables import mcnemar_exact, p_text
 
 FLAGS: Final[tuple[str, ...]] = ("success", "collision", "contact")
+
+
+def mcnemar_exact(b: int, c: int) -> float:
+    """Two-sided exact McNemar test: the p-value of ``b`` vs ``c`` discordant pairs under a fair coin."""
+    # Python integers: numpy's int64 would overflow in the terms below and in 1 << n, silently.
+    b, c = operator.index(b), operator.index(c)
+    n = b + c
+    if n == 0:
+        return 1.0
+    # C(n, k) for k <= min(b, c) built term by term: exact integers, linear in n (math.comb per term was
+    # quadratic), and an integer ratio, which cannot overflow a float as 2.0**n did from n = 1024.
+    term = tail = 1
+    for k in range(min(b, c)):
+        term = term * (n - k) // (k + 1)
+        tail += term
+    return min(1.0, 2 * tail / (1 << n))
+
+
+# The levels a p-value is read against. At two significant digits McNemar's 0.0498 (+42 / −25) printed as
+# 0.05 and 0.00997 (+74 / −45) as 0.01: significant, read as not.
+SIGNIFICANCE_LEVELS: Final[tuple[float, ...]] = (0.05, 0.01, 0.001)
+
+
+def p_text(p: float) -> str:
+    """``p`` to two significant digits, or as many more as keep it on its own side of each of
+    ``SIGNIFICANCE_LEVELS`` (17 give ``p`` itself)."""
+    for digits in range(2, 17):
+        text = f"{p:.{digits}g}"
+        if all((float(text) < level) == (p < level) for level in SIGNIFICANCE_LEVELS):
+            return text
+    return f"{p:.17g}"
 
 
 @dataclass(frozen=True, slots=True)  # one per episode: a million a run at 1000x Table II

@@ -9,7 +9,6 @@ on the crowds both methods ran (the same scenarios and seeds), with the exact Mc
 from __future__ import annotations
 
 import math
-import operator
 from collections.abc import Sequence
 from typing import Any, Final
 
@@ -17,6 +16,7 @@ from crowdsim.replay import recorded
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.experiments import safety_report as safety
 from pipelines.experiments.cells import EXPERIMENTS, Experiment
+from pipelines.experiments.paired import mcnemar_exact, p_text
 from pipelines.experiments.summary import CellSummary, Rate
 from pipelines.experiments.tasks import SCENARIOS
 
@@ -26,37 +26,6 @@ from pipelines.experiments.tasks import SCENARIOS
 MAX_CELL_COLUMNS: Final[int] = 16
 PAPER_ROW: Final[str] = "&nbsp;&nbsp;paper"  # the paper's figure, under ours
 Row = tuple[str, list[str]]  # a metric's label and its text in each cell
-
-
-def mcnemar_exact(b: int, c: int) -> float:
-    """Two-sided exact McNemar test: the p-value of ``b`` vs ``c`` discordant pairs under a fair coin."""
-    # Python integers: numpy's int64 would overflow in the terms below and in 1 << n, silently.
-    b, c = operator.index(b), operator.index(c)
-    n = b + c
-    if n == 0:
-        return 1.0
-    # C(n, k) for k <= min(b, c) built term by term: exact integers, linear in n (math.comb per term was
-    # quadratic), and an integer ratio, which cannot overflow a float as 2.0**n did from n = 1024.
-    term = tail = 1
-    for k in range(min(b, c)):
-        term = term * (n - k) // (k + 1)
-        tail += term
-    return min(1.0, 2 * tail / (1 << n))
-
-
-# The levels a p-value is read against. At two significant digits McNemar's 0.0498 (+42 / −25) printed as
-# 0.05 and 0.00997 (+74 / −45) as 0.01: significant, read as not.
-SIGNIFICANCE_LEVELS: Final[tuple[float, ...]] = (0.05, 0.01, 0.001)
-
-
-def p_text(p: float) -> str:
-    """``p`` to two significant digits, or as many more as keep it on its own side of each of
-    ``SIGNIFICANCE_LEVELS`` (17 give ``p`` itself)."""
-    for digits in range(2, 17):
-        text = f"{p:.{digits}g}"
-        if all((float(text) < level) == (p < level) for level in SIGNIFICANCE_LEVELS):
-            return text
-    return f"{p:.17g}"
 
 
 def paired_success(reference: CellSummary, other: CellSummary) -> tuple[int, int, float]:

@@ -11,8 +11,7 @@ import pytest
 from pipelines.cli import main
 from pipelines.commands.compare import labelled
 from pipelines.errors import PipelineError
-from pipelines.experiments.paired import Outcome, paired_interval, versus
-from pipelines.experiments.tables import mcnemar_exact
+from pipelines.experiments.paired import Outcome, mcnemar_exact, paired_interval, versus
 
 ENV = {"crowd": "orca", "crossing": "paper", "spawn_separation": 0.5, "formation": "auto", "time_limit": 40.0}
 

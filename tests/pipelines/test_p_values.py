@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 
 from pipelines.experiments.cells import get_experiment
-from pipelines.experiments.paired import Paired
+from pipelines.experiments.paired import Paired, mcnemar_exact
 from pipelines.experiments.summary import summarize
-from pipelines.experiments.tables import markdown_table, mcnemar_exact
+from pipelines.experiments.tables import markdown_table
 from tests.pipelines.test_small_fixes import _records
 
 SUCCEEDED, FAILED = (

@@ -27,12 +27,13 @@ from pipelines.experiments.cells import (
     get_experiment,
 )
 from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, EpisodeLog, error_keys, mcap_path
+from pipelines.experiments.paired import mcnemar_exact
 from pipelines.experiments.report import CELLS_CSV, write_report
 from pipelines.experiments.summary import _half_width, summarize, t95, wilson_interval
 from pipelines.experiments.sweep import run_sweep
 from pipelines.experiments.sweep_config import SweepConfig
 from pipelines.experiments.sweep_folder import sweep_lock
-from pipelines.experiments.tables import markdown_table, mcnemar_exact, paired_success
+from pipelines.experiments.tables import markdown_table, paired_success
 from pipelines.experiments.tasks import World, scenario_schedule
 from pipelines.experiments.worker import EpisodeOutcome, EpisodeWorker, is_failure
 from pipelines.loop.controllers import ControllerSpec, make_controller
