@@ -50,17 +50,7 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
     groups = report["groups"]
     first = report["runs"][0]["label"]
     by_humans = len({g["humans"] for g in groups}) > 1
-    teams = len({g["robots"] for g in groups}) > 1
-    series: dict[str, list[tuple[Any, Mapping[str, Any]]]] = {}
-    for g in groups:
-        for label, versus in g["versus_first"].items():
-            team = f", {counted(g['robots'], 'robot')}" if teams else ""
-            name = f"{g['method']}{team}: {label} − {first}"
-            if not by_humans:  # the x axis names the method: its teams' points had shared one x, one series
-                name = (
-                    f"{counted(g['robots'], 'robot')}: {label} − {first}" if teams else f"{label} − {first}"
-                )
-            series.setdefault(name, []).append((g, versus))
+    series = _series(groups, first, by_humans)
     # One x position per crowd size run (or per method), evenly spaced: a line across 5 and 7 humans read
     # as if 6 had run, and the axis had ticks at 5.5 humans.
     ticks = _ticks(groups, by_humans)
@@ -124,6 +114,25 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
         f"Paired on {shared} shared episode{'' if shared == 1 else 's'} (crowdmpc compare)", fontsize=11
     )
     return figure
+
+
+def _series(
+    groups: list[Mapping[str, Any]], first: str, by_humans: bool
+) -> dict[str, list[tuple[Any, Mapping[str, Any]]]]:
+    """Each series' name and its points (a group and its run's change against ``first``): one per method,
+    team and run after the first; where the x axis names the methods (``by_humans`` False), one per team and
+    run, since a method's teams had shared one x as one series."""
+    teams = len({g["robots"] for g in groups}) > 1
+    series: dict[str, list[tuple[Any, Mapping[str, Any]]]] = {}
+    for g in groups:
+        for label, versus in g["versus_first"].items():
+            team = counted(g["robots"], "robot")
+            if by_humans:
+                name = f"{g['method']}{f', {team}' if teams else ''}: {label} − {first}"
+            else:
+                name = f"{team}: {label} − {first}" if teams else f"{label} − {first}"
+            series.setdefault(name, []).append((g, versus))
+    return series
 
 
 def _mark_travel(
