@@ -9,7 +9,8 @@ method the columns share. Any other at one crowd size (the predictor swap, coupl
 ``OUTCOME_by_method.png``: a bar per method. Our 95% intervals are the error bars (Wilson
 for the rates, Student's t for the mean travel time: pipelines.experiments.summary), and each plot's title
 says which; the paper's figures are open squares (dashed lines across crowd sizes). The safety plots
-(closest approaches, the success / collision trade-off) are pipelines.experiments.safety_report's.
+(closest approaches, the success / collision trade-off) are pipelines.experiments.safety_plots', of
+safety_report's figures.
 """
 
 from __future__ import annotations
