@@ -10,6 +10,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
+from predictors.text_table import counted
+
 if TYPE_CHECKING:
     from pipelines.logs.digest import RunDigest
 
@@ -104,7 +106,7 @@ def warn_repeats(folder: Path, name: str, repeats: Mapping[str, str]) -> None:
     if repeats:
         left_out, kept = next(iter(repeats.items()))
         warn(
-            f"{folder} holds {len(repeats)} repeat{'s' * (len(repeats) != 1)} of episodes of {name} (same "
+            f"{folder} holds {counted(len(repeats), 'repeat')} of episodes of {name} (same "
             "scenario, seed and code), "
             f"left out so that each episode counts once: e.g. {left_out} repeats {kept}"
         )
@@ -120,7 +122,7 @@ def unread_below(folder: Path) -> int:
 
 def subfolders_note(folder: Path, n: int) -> str:
     return (
-        f"its subfolders hold {n} recording{'s' * (n != 1)}, not read with {folder}'s own files: review each "
+        f"its subfolders hold {counted(n, 'recording')}, not read with {folder}'s own files: review each "
         "subfolder"
     )
 
@@ -152,9 +154,7 @@ def deeper_note(folder: Path) -> str:
     names = [str(folder / top) for top in sorted(found)]
     shown = ", ".join(names[:MAX_FOLDERS_NAMED]) + (", ..." if len(names) > MAX_FOLDERS_NAMED else "")
     n = sum(found.values())
-    return (
-        f"; deeper folders hold {n} recording{'s' * (n != 1)} (under {shown}): review each of those folders"
-    )
+    return f"; deeper folders hold {counted(n, 'recording')} (under {shown}): review each of those folders"
 
 
 def _unrecorded_sweep(folder: Path) -> str:

@@ -110,9 +110,7 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
         title="95 % intervals",
     )
     shared = report["shared_episodes"]
-    figure.suptitle(
-        f"Paired on {shared} shared episode{'' if shared == 1 else 's'} (crowdmpc compare)", fontsize=11
-    )
+    figure.suptitle(f"Paired on {counted(shared, 'shared episode')} (crowdmpc compare)", fontsize=11)
     return figure
 
 
