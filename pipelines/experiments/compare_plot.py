@@ -4,6 +4,8 @@ s over the episodes both completed (Student's t), a panel each (pipelines.experi
 
 from __future__ import annotations
 
+import json
+import textwrap
 from collections.abc import Mapping
 from typing import Any, Final
 
@@ -23,6 +25,12 @@ MAX_LEVEL_NOTES: Final[int] = 8
 # The room added above the travel panel's points for "n = 1", as a fraction of their range (level, upright):
 # a line of the small font, or the words upright, in a panel about 2.4 in high.
 HEAD_ROOM: Final[tuple[float, float]] = (0.12, 0.3)
+# The settings a run after the first ran with otherwise, named under the title (the rest counted), each value
+# up to VALUE_CHARS characters, a line wrapped at SETTINGS_WIDTH (the figure's 9.6 in at 11 pt)
+MAX_SETTINGS_NAMED: Final[int] = 2
+VALUE_CHARS: Final[int] = 24
+SETTINGS_WIDTH: Final[int] = 100
+_GLUE: Final[str] = "\u00a0"  # no-break space: textwrap breaks at ASCII whitespace only
 # A panel without a point (no episode completed by both runs): its axis either side of zero, in its unit.
 EMPTY_SPAN: Final[float] = 1.0
 
@@ -110,8 +118,44 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
         title="95 % intervals",
     )
     shared = report["shared_episodes"]
-    figure.suptitle(f"Paired on {counted(shared, 'shared episode')} (crowdmpc compare)", fontsize=11)
+    title = f"Paired on {counted(shared, 'shared episode')} (crowdmpc compare)"
+    figure.suptitle("\n".join([title, *_settings_lines(report)]), fontsize=11)
     return figure
+
+
+def _settings_lines(report: Mapping[str, Any]) -> list[str]:
+    """Under the title, what each run after the first ran with otherwise (``settings_differ``: its first
+    settings named, the rest counted), or that it ran with the first's: the figure named the runs by their
+    labels alone, so a PNG of the paper's predictor against constant velocity did not say what changed.
+    None for a report without them."""
+    first = report["runs"][0]["label"]
+    lines = []
+    for label, rows in report.get("settings_differ", {}).items():
+        if not rows:
+            lines.append(f"{label} ran with the settings of {first}")
+            continue
+        items = [
+            f"{row['setting']} {_value(row['first'])} → {_value(row['this'])}"
+            for row in rows[:MAX_SETTINGS_NAMED]
+        ]
+        more = rows[MAX_SETTINGS_NAMED:]
+        items += [f"{counted(len(more), 'more setting')} (crowdmpc compare lists them)"] if more else []
+        # broken between the settings only: "... → \nnull" had parted a value from its setting
+        glued = "; ".join(item.replace(" ", _GLUE) for item in items)
+        text = textwrap.fill(f"{label} against {first}: {glued}", SETTINGS_WIDTH, break_long_words=False)
+        lines.append(text.replace(_GLUE, " "))
+    return lines
+
+
+def _value(text: str) -> str:
+    """A setting's values as compare's JSON holds them ('"social_lstm_eth"', 'null | 1.0'), a string
+    without its quotes, shortened to ``VALUE_CHARS``."""
+    try:
+        value = json.loads(text)
+    except ValueError:  # several values joined by " | ", or "(not recorded)"
+        value = text
+    shown = value if isinstance(value, str) else text
+    return shown if len(shown) <= VALUE_CHARS else shown[: VALUE_CHARS - 1] + "…"
 
 
 def _series(

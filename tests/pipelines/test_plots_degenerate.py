@@ -171,3 +171,34 @@ def test_a_title_names_a_team_other_than_the_papers():
     summaries = summarize(teams, cells, [_record(c, i, 1.0, 20) for c in cells for i in range(2)])
     title = outcome_figure(teams, summaries, TRAVEL).axes[0].get_title().split("\n")
     assert title[1] == "predictor social_lstm_eth; margins none"
+
+
+def test_compare_names_under_its_title_what_each_run_ran_with_otherwise():
+    """`compare lstm=T2 cv=T2CV --plot`: the figure named the runs by their labels alone, and a PNG of the
+    paper's predictor against constant velocity said nothing of the predictor. Under the title each run after
+    the first says what differs (two settings named, the rest counted; a setting and its values never parted
+    by the wrapping), or that it ran with the first's settings."""
+    rows = [
+        {"setting": "predictor", "first": '"social_lstm_eth"', "this": '"constant_velocity"'},
+        {"setting": "predictor_sha256", "first": f'"{"e" * 64}"', "this": "null"},
+        {"setting": "mpc.d_min", "first": "0.8", "this": "1.0"},
+    ]
+    report = {
+        "shared_episodes": 2,
+        "runs": [{"label": "lstm"}, {"label": "cv"}, {"label": "again"}],
+        "groups": [
+            {
+                "method": "CMPC",
+                "humans": 5,
+                "robots": 3,
+                "versus_first": {"cv": _versus(1.0), "again": _versus(0.0)},
+            }
+        ],
+        "settings_differ": {"cv": rows, "again": []},
+    }
+    assert compare_figure(report).get_suptitle().split("\n") == [
+        "Paired on 2 shared episodes (crowdmpc compare)",
+        "cv against lstm: predictor social_lstm_eth → constant_velocity;",
+        f"predictor_sha256 {'e' * 23}… → null; 1 more setting (crowdmpc compare lists them)",
+        "again ran with the settings of lstm",
+    ]
