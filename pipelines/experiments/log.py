@@ -81,8 +81,9 @@ class EpisodeLog:
                     ) from None
                 try:
                     record = json.loads(line) if line.strip() else None
-                # json's parser recurses: a line nested deeper than the stack is garbage too
-                except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+                # json's parser recurses: a line nested deeper than the stack is garbage too, as is an
+                # integer literal past Python's 4300 digits (a ValueError, no JSONDecodeError)
+                except (ValueError, RecursionError) as exc:
                     bad = (number, exc)
                     continue
                 if record is not None:
@@ -245,7 +246,8 @@ def error_keys(out: Path) -> set[str]:
         for line in f:
             try:
                 entry = json.loads(line)
-            except (json.JSONDecodeError, UnicodeDecodeError, RecursionError):  # nested past the stack
+            # nested past the stack, or an integer past 4300 digits (a ValueError, no JSONDecodeError)
+            except (ValueError, RecursionError):
                 continue
             if isinstance(entry, dict) and isinstance(entry.get("key"), str):
                 keys.add(entry["key"])

@@ -1,0 +1,72 @@
+"""A sweep folder whose files hold an integer literal longer than Python's 4300 digits: json's parser raises
+a plain ValueError for it (no JSONDecodeError), which ended a report, a resume, --reuse and compare in a
+traceback. Such a line is refused, or passed over, as any other line that is no JSON."""
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from pipelines.cli import main
+from pipelines.experiments.cells import get_experiment
+from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, error_keys
+from pipelines.experiments.sweep import run_sweep
+from pipelines.experiments.sweep_config import SweepConfig
+
+ARGV = ["sweep", "--experiment", "baselines", "--humans", "3", "--episodes-per-cell", "1", "--backend",
+        "inline", "--no-progress", "--jit", "off"]  # fmt: skip
+LONG = b'{"key": "x", "seed": 1' + b"0" * 5000 + b"}\n"  # int("1000...") past sys.get_int_max_str_digits()
+
+
+@pytest.fixture(scope="module")
+def good(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("good")
+    run_sweep(SweepConfig(get_experiment("baselines"), out, 1, humans=(3,), backend="inline", progress=False))
+    return out
+
+
+def _with_long_line(good: Path, out: Path) -> Path:
+    shutil.copytree(good, out)
+    first, second = (good / EPISODES_FILE).read_bytes().splitlines(keepends=True)
+    (out / EPISODES_FILE).write_bytes(first + LONG + second)
+    return out
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        [*ARGV, "--report-only", "--out", "{out}"],
+        [*ARGV, "--out", "{out}"],
+        [*ARGV, "--dry-run", "--out", "{out}"],
+        [*ARGV, "--out", "{new}", "--reuse", "{out}"],
+        ["compare", "a={out}", "b={good}"],
+    ],
+    ids=["report", "resume", "dry-run", "reuse", "compare"],
+)
+def test_a_record_with_an_integer_past_4300_digits_is_named_by_file_and_line(good, tmp_path, capsys, argv):
+    out = _with_long_line(good, tmp_path / "sweep")
+    before = (out / EPISODES_FILE).read_bytes()
+    code = main([a.format(out=out, good=good, new=tmp_path / "new") for a in argv])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert f"{out / EPISODES_FILE}:2: not a JSON record (" in err[0] and "4300 digits" in err[0]
+    assert (out / EPISODES_FILE).read_bytes() == before
+
+
+def test_such_a_last_line_is_cut_off_and_kept_as_a_torn_one_is(good, tmp_path, capsys):
+    out = tmp_path / "sweep"
+    shutil.copytree(good, out)
+    log = (out / EPISODES_FILE).read_bytes()
+    (out / EPISODES_FILE).write_bytes(log + LONG)
+    assert main([*ARGV, "--out", str(out)]) == 0
+    assert (out / EPISODES_FILE).read_bytes() == log
+    assert (out / (EPISODES_FILE + ".cut")).read_bytes() == LONG
+
+
+def test_such_an_error_entry_is_passed_over(good, tmp_path):
+    """errors.jsonl only orders a rerun's episodes: a line that is no entry is passed over, this one too."""
+    out = tmp_path / "sweep"
+    shutil.copytree(good, out)
+    (out / ERRORS_FILE).write_bytes(b'{"key": "y"}\n' + LONG)
+    assert error_keys(out) == {"y"}
+    assert main([*ARGV, "--out", str(out)]) == 0
