@@ -277,9 +277,14 @@ def sweep_of_recordings(path: Path, marker: str = EPISODES_FILE) -> Path | None:
 
 def read_json_file(path: Path, what: str, advice: str = "") -> Any:
     """``path``'s JSON document, or a PipelineError "PATH: not WHAT (the reason)ADVICE" for one that cannot
-    be read, is not text or not JSON, or nests too deeply."""
+    be read, is not text or not JSON, or nests too deeply. A key given twice is refused (json kept the last
+    without a word): a sweep that then rewrote sweep.json dropped what the first held, a run's record."""
+    from predictors.errors import DuplicateKey, unique_keys
+
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        return json.loads(path.read_text(encoding="utf-8"), object_pairs_hook=unique_keys)
+    except DuplicateKey as exc:
+        raise PipelineError(f"{path}: {exc}{advice}") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError, ValueError) as exc:
         raise PipelineError(f"{path}: not {what} ({type(exc).__name__}: {str(exc)[:120]}){advice}") from None
 

@@ -1,6 +1,6 @@
-"""A sweep folder whose files hold an integer literal longer than Python's 4300 digits: json's parser raises
-a plain ValueError for it (no JSONDecodeError), which ended a report, a resume, --reuse and compare in a
-traceback. Such a line is refused, or passed over, as any other line that is no JSON."""
+"""Sweep folders holding JSON that json reads unlike its other files: an integer literal longer than
+Python's 4300 digits (json's parser raises a plain ValueError for it, no JSONDecodeError, which ended a
+report, a resume, --reuse and compare in a traceback), a key given twice (json keeps the last)."""
 
 import shutil
 from pathlib import Path
@@ -9,7 +9,7 @@ import pytest
 
 from pipelines.cli import main
 from pipelines.experiments.cells import get_experiment
-from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, error_keys
+from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, SWEEP_FILE, error_keys
 from pipelines.experiments.sweep import run_sweep
 from pipelines.experiments.sweep_config import SweepConfig
 
@@ -70,3 +70,26 @@ def test_such_an_error_entry_is_passed_over(good, tmp_path):
     (out / ERRORS_FILE).write_bytes(b'{"key": "y"}\n' + LONG)
     assert error_keys(out) == {"y"}
     assert main([*ARGV, "--out", str(out)]) == 0
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [[*ARGV, "--out", "{out}"], [*ARGV, "--report-only", "--out", "{out}"]],
+    ids=["resume", "report"],
+)
+def test_a_sweep_file_naming_a_key_twice_is_refused_and_left_as_it_was(good, tmp_path, capsys, argv):
+    """json keeps the last of a key given twice: a resume took `"runs": []` typed after the runs, ran, and
+    wrote sweep.json back with its own run alone, the earlier runs' records lost."""
+    out = tmp_path / "sweep"
+    shutil.copytree(good, out)
+    text = (out / SWEEP_FILE).read_text().rstrip()
+    damaged = (text[:-1] + ', "runs": []}').encode()
+    (out / SWEEP_FILE).write_bytes(damaged)
+    assert main([a.format(out=out) for a in argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        f"crowdmpc sweep: error: {out / SWEEP_FILE}: the key 'runs' appears twice in one object; give each "
+        "key once (json would keep the last); restore it, or move it away (the episodes it listed are then "
+        "kept as runs of unknown code; a new --out starts afresh)"
+    ]
+    assert (out / SWEEP_FILE).read_bytes() == damaged
