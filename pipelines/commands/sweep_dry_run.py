@@ -21,15 +21,20 @@ def print_plan(
     reuse: Path | None,
     models: PlanModels | None = None,
 ) -> None:
-    """The cells of the plan, a line each; a folder's log read as the resume reads it
-    (``read_recorded``, which refuses what the resume would), and the episodes ``--reuse`` would take.
+    """The cells of the plan, a line each; a folder's sweep.json and log read as the resume reads them
+    (``sweep_meta``, ``read_recorded``, which refuse what the resume would), and the episodes ``--reuse``
+    would take.
     ``models``: the plan's checks' reads, whose weights and calibration blocks the records are checked
     against, as the run checks them (None: read again)."""
     from pipelines.experiments.log import EPISODES_FILE
     from pipelines.experiments.resume_checks import read_recorded
+    from pipelines.experiments.sweep import sweep_meta
     from predictors.text_table import counted
 
     out, experiment = Path(config.out), config.experiment
+    # the run refuses a sweep.json it cannot read, or of another experiment, before any episode: a preview
+    # that passed it said "a resume runs N" of a folder the resume refuses
+    sweep_meta(out, config)
     print(f"{experiment.title}: {len(cells)} cells x {config.episodes_per_cell} episodes = {len(tasks)}")
     log = out / EPISODES_FILE
     checked = None if models is None else models.checked()

@@ -87,9 +87,9 @@ class SweepOutcome:
         return 60.0 * self.ran / running if running > 0 else 0.0
 
 
-def _sweep_meta(out: Path, config: SweepConfig) -> dict[str, Any]:
+def sweep_meta(out: Path, config: SweepConfig) -> dict[str, Any]:
     """sweep.json's document (empty for a new sweep); PipelineError when it holds another experiment (a
-    directory belongs to one)."""
+    directory belongs to one). The dry run reads it so too, refusing what the run would."""
     path = out / SWEEP_FILE
     meta: dict[str, Any] = read_sweep_file(path) if path.exists() else {}
     if meta and meta.get("experiment") != config.experiment.name:
@@ -211,7 +211,7 @@ def run_sweep(
     if len(set(keys)) != len(keys):
         raise PipelineError("the sweep plans the same episode twice (repeated --humans?)")
     with sweep_lock(out, made):
-        meta = _sweep_meta(out, config)
+        meta = sweep_meta(out, config)
         checked = checked_inputs(tasks, weights, calibrations)
         if config.reuse is not None:  # its run lines and records, checked against what the workers are handed
             meta = seed_from(config.reuse, out, config.experiment, tasks, meta, config.progress, checked)

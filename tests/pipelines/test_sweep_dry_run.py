@@ -3,11 +3,23 @@ how many of their episodes the folder's log records, nor how many a resume would
 
 from __future__ import annotations
 
+import pytest
+
 from pipelines.cli import main
-from pipelines.experiments.log import EPISODES_FILE
+from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
 from tests.cli_calls import run_cli
 
 ARGV = ["sweep", "--experiment", "baselines", "--backend", "inline", "--no-progress"]
+OTHER = [
+    "sweep",
+    "--experiment",
+    "controllers",
+    "--controllers",
+    "straight",
+    "--backend",
+    "inline",
+    "--no-progress",
+]
 
 
 def test_a_dry_run_over_a_sweep_says_what_is_recorded_and_what_a_resume_runs(tmp_path, capsys):
@@ -60,3 +72,25 @@ def test_a_dry_run_into_a_folder_of_other_files_is_refused_as_the_run_is(tmp_pat
     assert f"{out} holds files but no sweep" in stderr and len(stderr.strip().splitlines()) == 1
     assert run_cli(capsys, *argv)[2] == stderr  # the run's refusal, word for word
     assert [p.name for p in out.iterdir()] == ["foo"]
+
+
+@pytest.mark.parametrize(
+    ("damage", "argv"),
+    [
+        (lambda text: b"\xff" + text, ARGV),  # no UTF-8: the resume reads sweep.json, the dry run did not
+        (lambda text: text, OTHER),  # a folder of the baselines
+    ],
+    ids=["unreadable", "another-experiment"],
+)
+def test_a_dry_run_refuses_the_sweep_file_the_resume_refuses(tmp_path, capsys, damage, argv):
+    """The dry run read the folder's log and not its sweep.json, so it said "a resume runs N" of a folder
+    whose sweep.json the resume then refused: one it could not read, or of another experiment."""
+    out = tmp_path / "sweep"
+    assert main([*ARGV, "--humans", "3", "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    damaged = damage((out / SWEEP_FILE).read_bytes())
+    (out / SWEEP_FILE).write_bytes(damaged)
+    argv = [*argv, "--humans", "3", "--episodes-per-cell", "2", "--out", str(out)]
+    code, stdout, stderr = run_cli(capsys, *argv, "--dry-run")
+    assert code == 2 and stdout == "" and len(stderr.strip().splitlines()) == 1
+    assert run_cli(capsys, *argv)[2] == stderr  # the run's refusal, word for word
+    assert (out / SWEEP_FILE).read_bytes() == damaged
