@@ -139,8 +139,17 @@ def _check_answers(address: str, given: str) -> None:
         return
     try:
         parts = urlsplit(address if "://" in address else f"//{address}")
+    except ValueError:  # an unclosed [ of an IPv6 host: Ray's own words name it
+        return
+    try:
         host, port = parts.hostname, parts.port
     except ValueError:  # a port that is no number: Ray's own words name it
+        number = parts.netloc.rpartition(":")[2]
+        if number.isdigit():  # past 65535, which Ray's client retried for ever as it does a silent port
+            raise PipelineError(
+                f"cannot join a Ray cluster at {given} {address!r}: port {number} is no TCP port "
+                f"(1 to 65535); {_give_address(given)}"
+            ) from None
         return
     if not host or port is None:
         return

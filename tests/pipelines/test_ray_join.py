@@ -308,3 +308,19 @@ def test_a_stopped_sweeps_cpu_projection_is_for_the_workers_the_cluster_fits(
     err = capsys.readouterr().err
     assert "the 4 planned episodes take" in err and "s for 2 workers on 2 free cores\n" in err
     assert err.strip().splitlines()[-1].startswith("crowdmpc sweep: error: the Ray cluster stopped answering")
+
+
+@pytest.mark.parametrize("port", ["65536", "99999", "1" + "0" * 30])
+def test_a_port_past_65535_is_refused_at_once_without_ray(port):
+    """Python's urlsplit refuses such a port (ValueError) and the probe left it to Ray, whose 2.60 client
+    retried `127.0.0.1:99999` for ever (as 192.0.2.2:99999, "Failed to connect to GCS ... within 5 seconds",
+    still joining after 2 min), where a port that is no number (127.0.0.1:abc) Ray refuses at once."""
+    fake = _ray()
+    for address, given in ((f"127.0.0.1:{port}", "--ray-address"), (f"ray://head:{port}", "RAY_ADDRESS")):
+        with pytest.raises(PipelineError) as refused:
+            join_cluster(fake, address, {}, given)
+        assert str(refused.value) == (
+            f"cannot join a Ray cluster at {given} {address!r}: port {port} is no TCP port (1 to 65535); "
+            + ray_join._give_address(given)
+        )
+    assert fake.calls == []  # type: ignore[attr-defined]
