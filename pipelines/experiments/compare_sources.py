@@ -225,7 +225,7 @@ def commit_text(code: Any) -> str | None:
     if isinstance(plugins, str):  # a recording's metadata holds it as JSON text
         try:
             plugins = json.loads(plugins)
-        except ValueError:
+        except (ValueError, RecursionError):  # json's parser recurses: text nested past the stack
             plugins = None
     if isinstance(plugins, dict) and plugins:
         shown = ", ".join(f"plugin {spec} {str(sha)[:12]}" for spec, sha in sorted(plugins.items()))

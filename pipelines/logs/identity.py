@@ -158,6 +158,6 @@ def recorded_plugins(value: str | None) -> dict[str, Any] | None:
     """The recorded plugins' code (JSON in the metadata), None where absent or not a JSON object."""
     try:
         plugins = json.loads(value) if value else None
-    except ValueError:  # a hand-edited file: no code named
+    except (ValueError, RecursionError):  # a hand-edited file (nested past json's stack too): no code named
         return None
     return plugins if isinstance(plugins, dict) else None

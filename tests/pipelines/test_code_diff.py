@@ -13,6 +13,7 @@ import pytest
 from pipelines import version
 from pipelines.cli import main
 from pipelines.experiments.compare_sources import commit_text
+from pipelines.logs.identity import recorded_plugins
 from pipelines.logs.review import commit_shown
 from tests.pipelines.test_compare import BASE, _record, _simulate_json, _sweep
 
@@ -123,3 +124,17 @@ def test_recordings_of_one_commit_with_other_uncommitted_changes_show_their_diff
     assert f"a: {tmp_path / 'a'}, 1 episode, code 0123456789ab+dirty:aaaaaaaa\n" in out
     assert f"b: {tmp_path / 'b'}, 1 episode, code 0123456789ab+dirty:bbbbbbbb\n" in out
     assert f"old: {tmp_path / 'old'}, 1 episode, code 0123456789ab+dirty\n" in out
+
+
+def test_recorded_plugins_nested_past_the_stack_name_no_plugins(tmp_path, capsys):
+    """The plugins' JSON text (a recording's metadata, or a sweep.json edited by hand) was parsed catching
+    ValueError alone: text nested past json's recursion ended `crowdmpc compare` in a RecursionError."""
+    deep = "[" * 100_000 + "]" * 100_000
+    meta = {"commit": "0123456789abcdef", "dirty": False, "plugins": deep}
+    assert commit_text(meta) == "0123456789ab"
+    assert recorded_plugins(deep) is None
+    path = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    (path / "sweep.json").write_text(json.dumps({"experiment": "table2", "runs": [{"code": meta}]}))
+    other = _sweep(tmp_path / "b", [_record(i, *o) for i, o in enumerate(BASE)])
+    assert main(["compare", f"a={path}", f"b={other}"]) == 0
+    assert f"a: {path}, 4 episodes, code 0123456789ab\n" in capsys.readouterr().out
