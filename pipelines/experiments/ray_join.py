@@ -1,9 +1,9 @@
 """Joining a Ray cluster (``sweep --ray-address``, or ``$RAY_ADDRESS`` as ``ray.init`` reads it): what goes
 wrong there is the user's set-up, not a bug, so each failure is one line naming the address (nothing
-listening at it, a dashboard's URL, a cluster that wants an authentication token, Ray's own refusals), a join
-that takes long says so, and on a cluster with fewer free CPUs than workers the sweep runs as many workers as
-fit. It also finds and tries the port whose answer says the cluster is still there (``gcs_endpoint``,
-``answers``). pipelines.experiments.backends' RayBackend calls it."""
+listening at it, another program's port, a dashboard's URL, a cluster that wants an authentication token,
+Ray's own refusals), a join that takes long says so, and on a cluster with fewer free CPUs than workers the
+sweep runs as many workers as fit. It also finds and tries the port whose answer says the cluster is still
+there (``gcs_endpoint``, ``answers``). pipelines.experiments.backends' RayBackend calls it."""
 
 from __future__ import annotations
 
@@ -16,6 +16,10 @@ from pipelines.errors import PipelineError
 
 JOIN_PROBE_S: Final[float] = 10.0  # a cluster's head answers a connection at once; a firewall drops it
 JOIN_NOTE_S: Final[float] = 30.0
+# a gRPC server's SETTINGS frame comes at once; a silent one is Ray's to judge
+JOIN_ANSWER_S: Final[float] = 3.0
+HTTP2_PREFACE: Final[bytes] = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n"  # what an HTTP/2 client sends first
+GRPC_SETTINGS: Final[bytes] = b"\0\0\0\x04\0\0\0\0\0"  # an empty SETTINGS frame: 9 bytes, type 4, stream 0
 RAY_ADDRESS_ENV: Final[str] = "RAY_ADDRESS"  # what ray.init joins when given no address (Ray's docs)
 
 
@@ -131,7 +135,8 @@ def _check_address_kind(address: str, given: str) -> None:
 def _check_answers(address: str, given: str) -> None:
     """PipelineError unless ``address``'s host takes a TCP connection at its port within ``JOIN_PROBE_S``
     (``auto`` and an address without a port are left to Ray): with nothing listening there, ``ray.init``
-    retried without end, and a Ctrl-C then read as a sweep to resume."""
+    retried without end, and a Ctrl-C then read as a sweep to resume; so it did at a port whose server
+    answers as no Ray does (``_first_bytes``), also refused."""
     import socket
     from urllib.parse import urlsplit
 
@@ -154,13 +159,47 @@ def _check_answers(address: str, given: str) -> None:
     if not host or port is None:
         return
     try:
-        socket.create_connection((host, port), timeout=JOIN_PROBE_S).close()
+        with socket.create_connection((host, port), timeout=JOIN_PROBE_S) as connection:
+            first = _first_bytes(connection)
     except OSError as exc:
         reason = f"no answer in {JOIN_PROBE_S:g} s" if isinstance(exc, TimeoutError) else exc.strerror or exc
         raise PipelineError(
             f"cannot join a Ray cluster at {given} {address!r}: nothing answers at {host}:{port} "
             f"({reason}); is the cluster running (`ray status` on its head)? {_give_address(given)}"
         ) from None
+    if len(first) >= len(GRPC_SETTINGS) and not _is_grpc(first):
+        raise PipelineError(
+            f"cannot join a Ray cluster at {given} {address!r}: {host}:{port} answers, but not as Ray does "
+            f"(its first bytes {first[:16]!r}; a head's GCS and Ray Client speak gRPC): another program's "
+            f"port? {_give_address(given)}"
+        )
+
+
+def _first_bytes(connection: Any) -> bytes:
+    """What a server sends first to an HTTP/2 client (gRPC's transport): a gRPC server, a Ray head's GCS or
+    Ray Client's (Ray 2.60, both), answers with its SETTINGS frame at once; an HTTP/1 server, an SSH daemon
+    or another program with other bytes, and Ray's client then retried them for ever. Bytes read within
+    ``JOIN_ANSWER_S`` (none where the server is silent, closes, or TLS is on: then Ray is left to judge)."""
+    if os.environ.get("RAY_USE_TLS", "").lower() in ("1", "true"):  # the server awaits a TLS hello
+        return b""
+    data = b""
+    try:
+        connection.settimeout(JOIN_ANSWER_S)
+        connection.sendall(HTTP2_PREFACE + GRPC_SETTINGS)
+        while len(data) < len(GRPC_SETTINGS):
+            chunk = connection.recv(64)
+            if not chunk:
+                break
+            data += chunk
+    except OSError:  # a timeout (TimeoutError) or a reset: what came so far
+        pass
+    return data
+
+
+def _is_grpc(first: bytes) -> bool:
+    """Whether ``first`` begins with an HTTP/2 SETTINGS frame on stream 0, as every HTTP/2 server's first
+    frame is (RFC 9113, 3.4): a 3-byte length, type 0x4, a flags byte, a 4-byte stream id of 0."""
+    return first[3] == 0x04 and first[5:9] == b"\0\0\0\0"
 
 
 def _still_joining(address: str) -> None:

@@ -3,7 +3,9 @@ records the calls. What the real Ray 2.60 does at each of these was met by hand 
 
 from __future__ import annotations
 
+import contextlib
 import socket
+import threading
 import time
 import types
 
@@ -14,10 +16,29 @@ from pipelines.experiments import ray_join
 from pipelines.experiments.ray_join import join_cluster, workers_that_fit
 
 
+def _answering(first: bytes):
+    """A host:port whose server sends ``first`` to each connection, as a gRPC server sends its SETTINGS."""
+    server = socket.create_server(("127.0.0.1", 0))
+
+    def serve():
+        while True:
+            try:
+                connection, _ = server.accept()
+            except OSError:  # closed: the test is over
+                return
+            with connection, contextlib.suppress(OSError):
+                connection.sendall(first)
+                connection.recv(64)  # the client's preface, then its close
+
+    threading.Thread(target=serve, daemon=True).start()
+    return server
+
+
 @pytest.fixture
 def listening():
-    """A host:port that takes connections (as a cluster's head does)."""
-    with socket.create_server(("127.0.0.1", 0)) as server:
+    """A host:port that takes connections and answers as a cluster's head does: Ray 2.60's GCS and Ray
+    Client sent these bytes, an HTTP/2 SETTINGS frame, at once (measured at `ray start --head`)."""
+    with _answering(b"\0\0\x18\x04\0\0\0\0\0" + b"\0\x04\0@\0\0" * 4) as server:
         yield f"127.0.0.1:{server.getsockname()[1]}"
 
 
@@ -324,3 +345,38 @@ def test_a_port_past_65535_is_refused_at_once_without_ray(port):
             + ray_join._give_address(given)
         )
     assert fake.calls == []  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize(
+    "first", [b"HTTP/1.0 400 Bad Request\r\n\r\n", b"SSH-2.0-OpenSSH_9.6\r\n"], ids=["http", "ssh"]
+)
+def test_a_port_that_answers_as_another_program_is_refused_at_once_without_ray(first):
+    """Ray 2.60 joining 127.0.0.1:PORT of a `python -m http.server` (or a port sending an SSH banner)
+    retried it for ever ("Failed to connect to GCS ... within 5 seconds", still joining after 2 min): the
+    probe took its connection for a head's. A head's GCS and Ray Client answer an HTTP/2 preface with a
+    SETTINGS frame (both measured at `ray start --head`); these servers answer otherwise."""
+    fake = _ray()
+    with _answering(first) as server:
+        address = f"127.0.0.1:{server.getsockname()[1]}"
+        start = time.perf_counter()
+        with pytest.raises(PipelineError) as refused:
+            join_cluster(fake, address, {})
+    assert time.perf_counter() - start < 2 and fake.calls == []  # type: ignore[attr-defined]
+    assert str(refused.value) == (
+        f"cannot join a Ray cluster at --ray-address {address!r}: {address} answers, but not as Ray does "
+        f"(its first bytes {first[:16]!r}; a head's GCS and Ray Client speak gRPC): another program's port? "
+        + ray_join._give_address("--ray-address")
+    )
+
+
+def test_a_silent_port_or_one_under_tls_is_left_to_ray(monkeypatch):
+    """A server that says nothing (a head slow to answer), or any answer where RAY_USE_TLS is on (the
+    preface is no TLS hello), is no proof of another program: Ray judges, as before."""
+    monkeypatch.setattr(ray_join, "JOIN_ANSWER_S", 0.2)
+    fake = _ray()
+    with socket.create_server(("127.0.0.1", 0)) as silent:
+        join_cluster(fake, f"127.0.0.1:{silent.getsockname()[1]}", {})
+    monkeypatch.setenv("RAY_USE_TLS", "1")
+    with _answering(b"HTTP/1.0 400 Bad Request\r\n\r\n") as server:
+        join_cluster(fake, f"127.0.0.1:{server.getsockname()[1]}", {})
+    assert len(fake.calls) == 2  # type: ignore[attr-defined]
