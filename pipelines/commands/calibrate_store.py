@@ -237,7 +237,8 @@ def _take_back(journal: Path, match: re.Match[str], path: Path) -> None:
         earlier = document["earlier"]
         if earlier is not None:
             earlier = [Calibration.from_json(b, journal) for b in earlier]
-    except (OSError, ValueError, KeyError, TypeError, PredictorError) as exc:
+    # RecursionError: json's parser recurses, and a journal edited to nest deeper than the stack is unreadable
+    except (OSError, ValueError, KeyError, TypeError, RecursionError, PredictorError) as exc:
         raise PipelineError(
             f"{journal}: a killed calibrate's record of the blocks to take back is unreadable ({exc}); "
             f"check {path} and remove {journal.name}"

@@ -301,3 +301,28 @@ def test_two_blocks_of_one_key_are_refused_before_the_write(tmp_path, monkeypatc
     with pytest.raises(PredictorError, match=r"^blocks\[1\] repeats predictor 'constant_velocity'"):
         save_calibrations([block, dataclasses.replace(block, alpha=0.1 + 5e-13)])
     assert read_calibration_file(calibrations_path()) == [block]
+
+
+@pytest.mark.parametrize(
+    ("content", "reason"),
+    [
+        ("[" * 100_000 + "]" * 100_000, "maximum recursion depth exceeded"),
+        ('{"stored": [], "earlier": 1' + "0" * 5000 + "}", "Exceeds the limit (4300 digits)"),
+    ],
+    ids=["nested", "long-integer"],
+)
+def test_a_damaged_journal_is_refused_in_one_line(tmp_path, monkeypatch, content, reason):
+    """The journal's reader caught json's ValueError but not its RecursionError: a journal nested past the
+    stack ended `crowdmpc simulate --margins conformal:0.1` (and every run taking killed blocks back) in a
+    traceback, where other damage is one line naming the journal."""
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    journal = tmp_path / ".calibrate-holdout.999999.json"  # a pid no process has here
+    journal.write_text(content)
+    monkeypatch.setattr("predictors.locking.pid_alive", lambda pid: False)
+    with pytest.raises(PipelineError) as refused:
+        take_back_killed()
+    said = str(refused.value)
+    assert said.startswith(
+        f"{journal}: a killed calibrate's record of the blocks to take back is unreadable ("
+    )
+    assert reason in said and "\n" not in said and journal.read_text() == content
