@@ -2,8 +2,9 @@
 
 ``symbolic`` holds the symbolic tensor torch code runs on; ``elementwise``, ``movement``, ``linalg``,
 ``layers`` and ``attention`` the operations, which ``ops`` enters in the dispatch tables; ``trace`` the run
-(and the layers it replaces: the recurrent cells, nn.MultiheadAttention) and the ``casadi.Function`` it
-becomes; ``parity`` the check against torch.
+(and the layers it replaces: the recurrent cells, nn.MultiheadAttention, and from ``transformer``
+nn.TransformerEncoderLayer and nn.TransformerEncoder) and the ``casadi.Function`` it becomes; ``parity`` the
+check against torch.
 """
 
 from predictors.export.errors import ExportError

@@ -2,9 +2,9 @@
 
 ``export_function(net, method, inputs, outputs, name)`` calls ``method`` (e.g. ``net.decode_step``) with one
 ``SymTensor`` per input. While it runs, the recurrent cells (``nn.LSTMCell``, ``nn.GRUCell``, whose forward
-calls fused kernels) and ``nn.MultiheadAttention`` are replaced by their CasADi forms on this instance only,
-and a pair of global module hooks keeps the path of the module that runs (``pool.embedding``), so that an
-unsupported operation is reported where it happens.
+calls fused kernels), ``nn.MultiheadAttention``, ``nn.TransformerEncoderLayer`` and ``nn.TransformerEncoder``
+are replaced by their CasADi forms on this instance only, and a pair of global module hooks keeps the path of
+the module that runs (``pool.embedding``), so that an unsupported operation is reported where it happens.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from predictors.export.linalg import linear
 from predictors.export.movement import squeeze, unsqueeze
 from predictors.export.ops import register
 from predictors.export.symbolic import SymTensor, Unexportable, lift
+from predictors.export.transformer import transformer_encoder, transformer_encoder_layer
 
 register()  # the dispatch tables SymTensor consults, filled before anything is exported
 
@@ -104,12 +105,15 @@ def gru_cell(cell: nn.GRUCell, input: Any, hx: Any = None) -> SymTensor:  # noqa
 
 
 # The layers whose forward is replaced by its CasADi form while traced: the recurrent cells call fused
-# kernels, and nn.MultiheadAttention's forward asks its inputs what a symbolic tensor cannot answer
-# (query.is_nested, torch.is_floating_point of a mask) to choose torch's fast path.
+# kernels, and nn.MultiheadAttention's, nn.TransformerEncoderLayer's and nn.TransformerEncoder's forwards
+# ask their inputs what a symbolic tensor cannot answer (query.is_nested, torch.is_floating_point of a mask)
+# to choose torch's fast path. Keyed by the exact class: a subclass may have a forward of its own.
 REPLACED: dict[type[nn.Module], Callable[..., Any]] = {
     nn.LSTMCell: lstm_cell,
     nn.GRUCell: gru_cell,
     nn.MultiheadAttention: multihead_attention,
+    nn.TransformerEncoderLayer: transformer_encoder_layer,
+    nn.TransformerEncoder: transformer_encoder,
 }
 
 

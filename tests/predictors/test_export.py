@@ -435,20 +435,20 @@ def test_unsupported_operation_names_the_layer_the_user_wrote_and_where_the_supp
 @pytest.mark.parametrize(
     ("fn", "modules", "message"),
     [
-        (
-            lambda m, x: m.block(x),
-            {"block": nn.TransformerEncoderLayer(4, 2, dim_feedforward=8, batch_first=True)},
-            r"unsupported tensor attribute \.is_nested, inside torch\.nn\.TransformerEncoderLayer, a layer "
+        (  # nn.TransformerEncoderLayer read src.is_nested too (mapped since)
+            lambda m, x: m.block(x, x),
+            {"block": nn.TransformerDecoder(nn.TransformerDecoderLayer(4, 2, 8, batch_first=True), 1)},
+            r"unsupported tensor attribute \.is_nested, inside torch\.nn\.TransformerDecoder, a layer "
             r"the export does not map \(in module 'block'\); ",
         ),
         (lambda m, x: x * x.nbytes, {}, r"unsupported tensor attribute \.nbytes \(in module 'Wrap'\); "),
     ],
-    ids=["transformer_encoder_layer", "plain"],
+    ids=["transformer_decoder", "plain"],
 )
 def test_an_unsupported_tensor_attribute_is_named_as_an_attribute(fn, modules, message):
     """nn.MultiheadAttention called without a mask (mapped since) read query.is_nested, a property of a
-    tensor, as nn.TransformerEncoderLayer reads src.is_nested: the refusal named it ".is_nested()", a method
-    no one calls."""
+    tensor, as nn.TransformerDecoder reads tgt.is_nested: the refusal named it ".is_nested()", a method no one
+    calls."""
     with pytest.raises(ExportError, match=message) as info:
         export(fn, (1, 3, 4), **modules)
     assert "()" not in str(info.value)
