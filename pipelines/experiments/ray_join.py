@@ -2,7 +2,8 @@
 wrong there is the user's set-up, not a bug, so each failure is one line naming the address (nothing
 listening at it, another program's port, a dashboard's URL, a cluster that wants an authentication token,
 Ray's own refusals), a join that takes long says so, and on a cluster with fewer free CPUs than workers the
-sweep runs as many workers as fit. It also finds and tries the port whose answer says the cluster is still
+sweep runs as many workers as fit. Ray's C++ warnings that repeat while it retries a refusal show once
+(pipelines.experiments.ray_stderr). It also finds and tries the port whose answer says the cluster is still
 there (``gcs_endpoint``, ``answers``). pipelines.experiments.backends' RayBackend calls it."""
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import threading
 from typing import Any, Final
 
 from pipelines.errors import PipelineError
+from pipelines.experiments.ray_stderr import repeats_said_once
 
 JOIN_PROBE_S: Final[float] = 10.0  # a cluster's head answers a connection at once; a firewall drops it
 JOIN_NOTE_S: Final[float] = 30.0
@@ -104,7 +106,8 @@ def join_cluster(ray: Any, address: str, env: dict[str, Any], given: str = "--ra
     if isinstance(ray_error, type) and issubclass(ray_error, BaseException):
         refused += (ray_error,)
     try:
-        ray.init(address=address, runtime_env=env, log_to_driver=False)
+        with repeats_said_once():  # Ray's C++ client warns once a second while it retries a refusal
+            ray.init(address=address, runtime_env=env, log_to_driver=False)
     except refused as exc:
         # refused for its token: the address is right, and the hint is the whole answer
         tail = "" if _refused_token(exc) else f"; {_give_address(given)}"

@@ -380,3 +380,34 @@ def test_a_silent_port_or_one_under_tls_is_left_to_ray(monkeypatch):
     with _answering(b"HTTP/1.0 400 Bad Request\r\n\r\n") as server:
         join_cluster(fake, f"127.0.0.1:{server.getsockname()[1]}", {})
     assert len(fake.calls) == 2  # type: ignore[attr-defined]
+
+
+def test_rays_warnings_alike_at_a_refused_join_are_said_once(listening, capfd):
+    """A cluster refusing the driver's token: Ray 2.60's client wrote "[time W pid tid] gcs_client.cc:210:
+    Failed to get cluster ID from GCS server: Unauthenticated: ..." to file descriptor 2 once a second, twenty
+    lines alike before the sweep's own line (`RAY_AUTH_MODE=token RAY_AUTH_TOKEN=<wrong> crowdmpc sweep
+    --ray-address HOST:6391 ...` on a `ray start --head`). Each distinct line is kept, in order."""
+    import os
+
+    refusal = (
+        "gcs_client.cc:210: Failed to get cluster ID from GCS server: Unauthenticated: InvalidAuthToken\n"
+    )
+
+    def init(**_):
+        os.write(2, b"INFO worker.py:1841 -- Connecting to existing Ray cluster\n")
+        for second in range(3):
+            os.write(2, f"[2026-12-07 23:38:5{second},263 W 28117 28117] {refusal}".encode())
+        os.write(2, b"[2026-12-07 23:38:59,001 W 28117 28117] other.cc:1: something else\n")
+        raise ConnectionError("Failed to connect to Ray cluster at 192.0.2.2:6391") from RuntimeError(
+            "InvalidAuthToken"
+        )
+
+    with pytest.raises(PipelineError, match="refused this driver's authentication token|wants an auth"):
+        join_cluster(_ray(init), listening, {})
+    os.write(2, f"[2026-12-07 23:39:00,000 W 28117 28117] {refusal}".encode())  # after the join: as it comes
+    assert capfd.readouterr().err.splitlines() == [
+        "INFO worker.py:1841 -- Connecting to existing Ray cluster",
+        f"[2026-12-07 23:38:50,263 W 28117 28117] {refusal.strip()}",
+        "[2026-12-07 23:38:59,001 W 28117 28117] other.cc:1: something else",
+        f"[2026-12-07 23:39:00,000 W 28117 28117] {refusal.strip()}",
+    ]
