@@ -36,6 +36,7 @@ from pipelines.experiments.ray_join import (
     gcs_endpoint,
     join_cluster,
     joining_from_environment,
+    left_to_the_job,
     stopped_answering,
     workers_that_fit,
 )
@@ -154,7 +155,7 @@ class RayBackend:
         self._ray: Any = ray
         self._owns_ray = not ray.is_initialized()
         if self._owns_ray:
-            env = {"env_vars": worker_environment()}
+            env = {"env_vars": left_to_the_job(worker_environment())}
             # Ray's driver installs its own SIGTERM handler, which aborted a sweep (exit 134, no report)
             # where the other backends stop as at Ctrl-C (pipelines.loop.interrupt): put ours back after
             terminate = signal.getsignal(signal.SIGTERM)

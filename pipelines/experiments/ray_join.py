@@ -3,11 +3,13 @@ wrong there is the user's set-up, not a bug, so each failure is one line naming 
 listening at it, another program's port, a dashboard's URL, a cluster that wants an authentication token,
 Ray's own refusals), a join that takes long says so, and on a cluster with fewer free CPUs than workers the
 sweep runs as many workers as fit. Ray's C++ warnings that repeat while it retries a refusal show once
-(pipelines.experiments.ray_stderr). It also finds and tries the port whose answer says the cluster is still
-there (``gcs_endpoint``, ``answers``). pipelines.experiments.backends' RayBackend calls it."""
+(pipelines.experiments.ray_stderr), and the variables a `ray job submit` job's runtime_env sets are left to it
+(``left_to_the_job``). It also finds and tries the port whose answer says the cluster is still there
+(``gcs_endpoint``, ``answers``). pipelines.experiments.backends' RayBackend calls it."""
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 import threading
@@ -23,6 +25,8 @@ JOIN_ANSWER_S: Final[float] = 3.0
 HTTP2_PREFACE: Final[bytes] = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n"  # what an HTTP/2 client sends first
 GRPC_SETTINGS: Final[bytes] = b"\0\0\0\x04\0\0\0\0\0"  # an empty SETTINGS frame: 9 bytes, type 4, stream 0
 RAY_ADDRESS_ENV: Final[str] = "RAY_ADDRESS"  # what ray.init joins when given no address (Ray's docs)
+# Ray's job supervisor's: a `ray job submit` entrypoint's job config, its runtime_env among it (Ray 2.60)
+RAY_JOB_CONFIG_ENV: Final[str] = "RAY_JOB_CONFIG_JSON_ENV_VAR"
 
 
 def address_from_environment() -> str | None:
@@ -116,6 +120,29 @@ def join_cluster(ray: Any, address: str, env: dict[str, Any], given: str = "--ra
         ) from None
     finally:
         waiting.cancel()
+
+
+def left_to_the_job(env_vars: dict[str, str]) -> dict[str, str]:
+    """``env_vars`` for the actors, less those a `ray job submit` job's runtime_env sets to the same value:
+    the entrypoint's ray.init merges the job's runtime_env with the driver's and refuses a variable both name,
+    even alike (Ray 2.60: "Failed to merge the Job's runtime env ... because of a conflict"), so a job given
+    CROWDMPC_DATA in its --runtime-env-json never joined. The job's own variables reach every actor. One the
+    job sets to another value than the sweep's workers need is refused in one line, naming it."""
+    try:
+        job = json.loads(os.environ.get(RAY_JOB_CONFIG_ENV) or "{}").get("runtime_env") or {}
+        job_vars = {str(k): str(v) for k, v in (job.get("env_vars") or {}).items()}
+    except (ValueError, AttributeError):  # not a job config this code knows: Ray's to read, as it does
+        return env_vars
+    differ = [
+        f"{k}={job_vars[k]!r} (the sweep's: {v!r})" for k, v in env_vars.items() if job_vars.get(k, v) != v
+    ]
+    if differ:
+        raise PipelineError(
+            f"the Ray job's runtime_env sets {', '.join(differ)}, and Ray refuses a variable that the job "
+            "and the sweep's workers both set: leave it out of the job's env_vars (the driver's CROWDMPC_* "
+            "variables reach the workers without it)"
+        )
+    return {k: v for k, v in env_vars.items() if k not in job_vars}
 
 
 def _give_address(given: str) -> str:

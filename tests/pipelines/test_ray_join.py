@@ -411,3 +411,31 @@ def test_rays_warnings_alike_at_a_refused_join_are_said_once(listening, capfd):
         "[2026-12-07 23:38:59,001 W 28117 28117] other.cc:1: something else",
         f"[2026-12-07 23:39:00,000 W 28117 28117] {refusal.strip()}",
     ]
+
+
+def test_a_ray_job_given_crowdmpc_variables_in_its_runtime_env_still_joins(monkeypatch):
+    """`ray job submit --runtime-env-json '{"env_vars": {"CROWDMPC_DATA": ...}}' -- crowdmpc sweep ...`: the
+    entrypoint has the job's variables and its job config (RAY_JOB_CONFIG_JSON_ENV_VAR); Ray 2.60's ray.init
+    refused to merge the job's runtime_env with the sweep's, which named CROWDMPC_DATA too ("Failed to merge
+    the Job's runtime env ... because of a conflict"; met by running the sweep under that variable on a `ray
+    start --head`, the head having no Jobs API). The job's own variables are left to the job."""
+    import json
+
+    from pipelines.experiments.backends import RayBackend
+
+    fake = _backend_ray(monkeypatch)
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    monkeypatch.setenv("CROWDMPC_DATA", "/data/shared")
+    job = {
+        "runtime_env": {"working_dir": "gcs://_ray_pkg_x.zip", "env_vars": {"CROWDMPC_DATA": "/data/shared"}}
+    }
+    monkeypatch.setenv("RAY_JOB_CONFIG_JSON_ENV_VAR", json.dumps(job))
+    RayBackend(1, "none", address=None)
+    sent = fake.calls[0]["runtime_env"]["env_vars"]  # type: ignore[attr-defined]
+    assert "CROWDMPC_DATA" not in sent and sent["OMP_NUM_THREADS"] == "1"
+    job["runtime_env"]["env_vars"] = {"OMP_NUM_THREADS": "4"}  # the workers need one thread each
+    monkeypatch.setenv("RAY_JOB_CONFIG_JSON_ENV_VAR", json.dumps(job))
+    with pytest.raises(
+        PipelineError, match=r"sets OMP_NUM_THREADS='4' \(the sweep's: '1'\), and Ray refuses"
+    ):
+        RayBackend(1, "none", address=None)
