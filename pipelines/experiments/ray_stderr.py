@@ -23,9 +23,8 @@ from typing import Final
 
 # Ray's C++ lines: "[2026-12-07 23:38:53,263 W 28117 28117] gcs_client.cc:210: Failed to ..."
 RAY_CPP_LINE: Final = re.compile(rb"^\[\d{4}-\d\d-\d\d [^\]]*\] ")
-DRAIN_S: Final[float] = (
-    2.0  # the copier's last lines, once the join is over (a process Ray left holds the pipe)
-)
+# the copier's last lines, once the join is over (a process Ray left holds the pipe)
+DRAIN_S: Final[float] = 2.0
 
 
 @contextlib.contextmanager
