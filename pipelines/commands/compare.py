@@ -38,12 +38,13 @@ same recording, the same placement rules and formation), and the same method (ca
 sweeps' episodes the same cell, whatever their columns' labels: `--vary mpc.d_min=0.8,1.0`'s 0.8 column is
 Table II's cell). Only episodes every run holds are compared. First each run's folder, episodes and code (the
 commits it names, each with its plugins' files); then, for each method and crowd size, every run's success,
-collision and contact rates (%) and mean travel time over its successes (s), and for each run after the first,
-against it: +k / −j, the episodes where the run has the outcome and the first run not, and the reverse, with
-the exact McNemar p; the mean travel-time difference over the episodes both completed, ± Student's t 95 %
-half-width, their number in brackets; and how many episodes have every metric equal. Last, the settings the
-compared groups' episodes ran with where they differ from the first run's. --plot draws each change with its
-95 % interval (the rates' by Newcombe's square-and-add for paired proportions; --json holds them too).
+collision, contact and discomfort rates (%) and mean travel time over its successes (s), and for each run
+after the first, against it: +k / −j, the episodes where the run has the outcome and the first run not, and
+the reverse, with the exact McNemar p; the mean travel-time difference over the episodes both completed,
+± Student's t 95 % half-width, their number in brackets; and how many episodes have every metric equal.
+Last, the settings the compared groups' episodes ran with where they differ from the first run's. --plot
+draws each change with its 95 % interval (the rates' by Newcombe's square-and-add for paired proportions;
+--json holds them too).
 --expect-identical exits 1 unless every episode of every run is in every other with every metric equal: a
 change that must not move a result (`--jit on` against off, a refactoring).
 """
@@ -276,6 +277,7 @@ def _flag_json(p: Paired) -> dict[str, Any]:
 
 
 def _text(report: dict[str, Any]) -> str:
+    from pipelines.experiments.paired import FLAGS
     from pipelines.logs.review import count
 
     first = report["runs"][0]["label"]
@@ -285,26 +287,25 @@ def _text(report: dict[str, Any]) -> str:
         lines.append(f"  {r['label']}: {r['path']}, {count(r['episodes'], 'episode')}, code {code}")
     lines += [
         "",
-        f"success / collision / contact %, travel s (mean over successes); against {first}: +k / −j episodes "
-        "with the outcome only in this run / only in the first (exact McNemar p), travel difference over the "
-        "episodes both completed (mean ± 95 %, their number), episodes with every metric equal",
+        f"success / collision / contact / discomfort %, travel s (mean over successes); against {first}: "
+        "+k / −j episodes with the outcome only in this run / only in the first (exact McNemar p), travel "
+        "difference over the episodes both completed (mean ± 95 %, their number), episodes with every metric "
+        "equal",
         "",
-        "| method | humans | robots | run | episodes | success % | collision % | contact % | travel s | "
-        "success | collision | contact | travel Δ s | same |",
-        "|---" * 14 + "|",
+        "| method | humans | robots | run | episodes | success % | collision % | contact % | discomfort % | "
+        "travel s | success | collision | contact | discomfort | travel Δ s | same |",
+        "|---" * 16 + "|",
     ]
     for g in report["groups"]:
         for label, s in g["runs"].items():
-            rates = [f"{s['rates'][name]:.1f}" for name in ("success", "collision", "contact")]
+            rates = [f"{s['rates'][name]:.1f}" for name in FLAGS]
             travel = "n/a" if s["travel_time"] is None else f"{s['travel_time']:.1f}"
             v = g["versus_first"].get(label)
             paired = (
-                ["", "", "", "", ""]
+                [""] * (len(FLAGS) + 2)
                 if v is None
                 else [
-                    v["text"]["success"],
-                    v["text"]["collision"],
-                    v["text"]["contact"],
+                    *(v["text"][name] for name in FLAGS),
                     v["text"]["travel"],
                     f"{v['same_metrics']} of {g['episodes']}",
                 ]

@@ -1,6 +1,6 @@
 """Runs (sweeps, simulate --json files, MCAP recordings) compared on the crowds they share: each run's
-success, collision, contact and travel time per method and crowd size, and each run against the first,
-episode by episode (``crowdmpc compare``).
+success, collision, contact, discomfort and travel time per method and crowd size, and each run against the
+first, episode by episode (``crowdmpc compare``).
 
 Which episodes pair. Two runs face the same crowd when they ran the same scenario from the same seed with the
 same number of humans and robots, and the crowd was made alike: ORCA's humans or the same replayed recording
@@ -18,9 +18,12 @@ comparison is what the runs differ in, listed beside it (``settings_differ``); o
 The paired counts are the exact McNemar test's discordant pairs (pipelines.experiments.paired): episodes where
 the run has the outcome and the first run not, and the reverse. The difference of the two rates has Newcombe's
 square-and-add 95 % interval for paired proportions (pipelines.experiments.paired), which unlike the normal
-approximation stays inside [-100, 100] % and is not of zero width at 0 of n. Travel time is compared on the
-episodes both runs completed, as the mean of the differences with Student's t 95 % half-width, as cells.csv
-gives a mean's. Each describes one group; none is corrected for the number of groups compared.
+approximation stays inside [-100, 100] % and is not of zero width at 0 of n. Discomfort is one of these flags:
+the paper's discomfort rate is the % of episodes in which some robot's projected path crossed a human's, each
+episode's yes or no, so it pairs as collision does (its per-step frequency is the sweep's cells.csv's). Travel
+time is compared on the episodes both runs completed, as the mean of the differences with Student's t 95 %
+half-width, as cells.csv gives a mean's. Each describes one group; none is corrected for the number of groups
+compared.
 """
 
 from __future__ import annotations
@@ -219,12 +222,13 @@ def _with_unrecorded(config: Any) -> dict[str, Any]:
 
 def _outcome(record: Mapping[str, Any], kinds: dict[frozenset[str], frozenset[str]]) -> Outcome:
     metrics = record["metrics"]
-    success, collision, contact = (bool(metrics.get(name)) for name in FLAGS)
+    success, collision, contact, discomfort = (bool(metrics.get(name)) for name in FLAGS)
     core = {k: v for k, v in metrics.items() if k not in ADDED_FIELDS}
     added = frozenset(metrics.keys() & ADDED_FIELDS)
     added = kinds.setdefault(added, added)
     travel = metrics.get("travel_time")
-    return Outcome(success, collision, contact, travel, record["key"], _digest(metrics), _digest(core), added)
+    digests = (_digest(metrics), _digest(core))
+    return Outcome(success, collision, contact, discomfort, travel, record["key"], *digests, added)
 
 
 def _digest(values: Mapping[str, Any]) -> bytes:

@@ -1,6 +1,6 @@
 """``crowdmpc compare --plot``: each run's change against the first, per method and crowd size, with its 95 %
-interval: success, collision and contact in percentage points (Newcombe's paired interval), travel time in
-s over the episodes both completed (Student's t), a panel each (pipelines.experiments.compare)."""
+interval: success, collision, contact and discomfort in percentage points (Newcombe's paired interval), travel
+time in s over the episodes both completed (Student's t), a panel each (pipelines.experiments.compare)."""
 
 from __future__ import annotations
 
@@ -16,8 +16,13 @@ PANELS: Final[tuple[tuple[str, str], ...]] = (
     ("success", "success (pp)"),
     ("collision", "collision (pp)"),
     ("contact", "contact (pp)"),
+    ("discomfort", "discomfort (pp)"),
     ("travel", "travel time (s), both completed"),
 )
+# Panels two to a row, each about 4.2 x 2.4 in (MAX_LEVEL_NOTES, HEAD_ROOM): three rows for the five, the
+# sixth place left empty; the title and the legend below take the rest of the height.
+ROWS: Final[int] = 3
+FIGURE_SIZE: Final[tuple[float, float]] = (9.6, 9.6)
 SPREAD: Final[float] = 0.5  # of the distance between neighbouring x positions, taken by the lines' offsets
 # Up to this many x positions, a column of the travel panel (about 4 in wide) is wider than "n = 1" (0.35 in
 # at 8.3 pt): the note reads across; past it, it stands upright.
@@ -62,8 +67,11 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
     # One x position per crowd size run (or per method), evenly spaced: a line across 5 and 7 humans read
     # as if 6 had run, and the axis had ticks at 5.5 humans.
     ticks = _ticks(groups, by_humans)
-    figure = Figure(figsize=(9.6, 7.0), layout="constrained")
-    axes = list(figure.subplots(2, 2, sharex=True).flat)
+    figure = Figure(figsize=FIGURE_SIZE, layout="constrained")
+    axes = list(figure.subplots(ROWS, 2, sharex=True).flat)
+    for spare in axes[len(PANELS) :]:  # an empty frame read as a panel without any point
+        spare.remove()
+    axes = axes[: len(PANELS)]
     notes: dict[int, list[tuple[float, int | None, dict[str, str]]]] = {}  # per x position (_mark_travel)
     pointed: set[str] = set()  # the panels with a point of some series
     for k, (name, points) in enumerate(series.items()):

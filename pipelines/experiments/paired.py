@@ -15,7 +15,9 @@ from typing import Final
 
 from pipelines.experiments.summary import t95, wilson_interval
 
-FLAGS: Final[tuple[str, ...]] = ("success", "collision", "contact")
+# The paper's per-episode outcomes (Section VI): discomfort too is "% of simulations" with the event, each
+# episode's flag, so it pairs as the others do (McNemar, Newcombe), not as a mean of per-step frequencies.
+FLAGS: Final[tuple[str, ...]] = ("success", "collision", "contact", "discomfort")
 
 
 def mcnemar_exact(b: int, c: int) -> float:
@@ -57,6 +59,7 @@ class Outcome:
     success: bool
     collision: bool
     contact: bool
+    discomfort: bool
     travel_time: float | None
     key: str
     digest: bytes

@@ -18,13 +18,13 @@ ENV = {"crowd": "orca", "crossing": "paper", "spawn_separation": 0.5, "formation
 
 def _record(i: int, success: bool, collision: bool, travel: float, *, method="CMPC", humans=7, **changes):
     """Episode ``i`` of a cell (circle when even, seed i // 2) with the outcomes given; ``changes`` replace
-    parts of it: ``env``, ``mpc`` (the config's), ``contact``, ``min_distance``."""
+    parts of it: ``env``, ``mpc`` (the config's), ``contact``, ``discomfort``, ``min_distance``."""
     metrics = {
         "success": success,
         "travel_time": travel if success else None,
         "collision": collision,
         "contact": changes.get("contact", False),
-        "discomfort": False,
+        "discomfort": changes.get("discomfort", False),
         "timeout": not success,
         "min_distance": changes.get("min_distance", 1.0),
         "min_distance_robots": 1.0,
@@ -85,12 +85,12 @@ def test_two_runs_by_hand(tmp_path, capsys):
     assert main(["compare", f"base={a}", f"new={b}", "--json", str(tmp_path / "c.json")]) == 0
     rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| CMPC")]
     # base: 3 of 4 succeed, 2 of 4 collide, travel (10 + 12 + 9) / 3 = 10.33
-    assert rows[0] == "| CMPC | 7 | 3 | base | 4 | 75.0 | 50.0 | 0.0 | 10.3 |  |  |  |  |  |"
+    assert rows[0] == "| CMPC | 7 | 3 | base | 4 | 75.0 | 50.0 | 0.0 | 0.0 | 10.3 |  |  |  |  |  |  |"
     # new: 3 of 4, 0 of 4, (11 + 13 + 12) / 3 = 12; success +1 (episode 1) / -1 (episode 2), McNemar p = 1;
     # collision +0 / -2, p = 2 / 4 = 0.5; travel differences 1 and 3: mean 2, sd sqrt(2), half t95(1) = 12.71
     assert rows[1] == (
-        "| CMPC | 7 | 3 | new | 4 | 75.0 | 0.0 | 0.0 | 12.0 | +1 / −1 (p = 1) | +0 / −2 (p = 0.5) "
-        "| +0 / −0 (p = 1) | +2.00 ± 12.71 (2) | 0 of 4 |"
+        "| CMPC | 7 | 3 | new | 4 | 75.0 | 0.0 | 0.0 | 0.0 | 12.0 | +1 / −1 (p = 1) | +0 / −2 (p = 0.5) "
+        "| +0 / −0 (p = 1) | +0 / −0 (p = 1) | +2.00 ± 12.71 (2) | 0 of 4 |"
     )
     report = json.loads((tmp_path / "c.json").read_text())
     against = report["groups"][0]["versus_first"]["new"]
@@ -102,6 +102,38 @@ def test_two_runs_by_hand(tmp_path, capsys):
     }
     assert against["travel_difference"] == {"mean": 2.0, "half_width_95": pytest.approx(12.7062), "n": 2}
     assert report["runs"][0]["code"] == ["0123456789ab"] and report["shared_episodes"] == 4
+
+
+def test_discomfort_is_paired_as_the_papers_rate_of_episodes(tmp_path, capsys):
+    """Discomfort, one of the paper's four metrics (% of episodes in which a robot's projected path crossed a
+    human's), was not compared at all: neither rates, nor the paired counts, nor --json. It pairs as the
+    other flags do. Base 1,1,0,0 against new 0,1,1,1: 50 % and 75 %, +2 (episodes 2, 3) / −1 (episode 0),
+    McNemar p = 2 (C(3,0) + C(3,1)) / 2^3 = 1; one pair with it in both, none in neither."""
+    base = [_record(i, *o, discomfort=i < 2) for i, o in enumerate(BASE)]
+    new = [_record(i, *o, discomfort=i > 0) for i, o in enumerate(NEW)]
+    a, b = _sweep(tmp_path / "a", base), _sweep(tmp_path / "b", new)
+    assert main(["compare", f"base={a}", f"new={b}", "--json", str(tmp_path / "c.json")]) == 0
+    out = capsys.readouterr().out
+    header = next(line for line in out.splitlines() if line.startswith("| method"))
+    assert header.split(" | ")[5:10] == ["success %", "collision %", "contact %", "discomfort %", "travel s"]
+    rows = [line.split(" | ") for line in out.splitlines() if line.startswith("| CMPC")]
+    assert (rows[0][8], rows[1][8]) == ("50.0", "75.0")
+    assert rows[1][13] == "+2 / −1 (p = 1)"  # after success, collision and contact's paired counts
+    report = json.loads((tmp_path / "c.json").read_text())
+    group = report["groups"][0]
+    assert [group["runs"][run]["rates"]["discomfort"] for run in ("base", "new")] == [50.0, 75.0]
+    against = group["versus_first"]["new"]
+    low, high = paired_interval(both=1, gained=2, lost=1, neither=0)
+    assert against["discomfort"] == {
+        "gained": 2,
+        "lost": 1,
+        "p": 1.0,
+        "difference_pp": 25.0,
+        "interval_pp": [100 * low, 100 * high],
+    }
+    assert against["text"]["discomfort"] == "+2 / −1 (p = 1)"
+    # additions only: the keys scripts read before are all still there
+    assert {"success", "collision", "contact", "travel_difference", "same_metrics", "text"} <= set(against)
 
 
 def test_the_code_named_is_that_of_the_runs_the_episodes_name(tmp_path, capsys):
@@ -126,7 +158,7 @@ def test_mcnemar_and_the_travel_spread_by_hand():
     assert mcnemar_exact(1, 3) == pytest.approx(0.625)
 
     def o(success, travel):
-        return Outcome(success, False, False, travel, "k", b"", b"", frozenset())
+        return Outcome(success, False, False, False, travel, "k", b"", b"", frozenset())
 
     v = versus(
         [o(True, 10.0), o(True, 10.0), o(True, 10.0), o(False, None)], [o(True, 11.0), o(True, 12.0)] * 2
@@ -515,7 +547,7 @@ def test_episodes_of_one_cell_share_their_identitys_strings():
     assert one[4] != two[4]  # the seeds
     shared = [i for i, part in enumerate(one) if isinstance(part, str)]
     assert len(shared) >= 7 and all(one[i] is two[i] for i in shared)
-    assert not hasattr(Outcome(True, False, False, 1.0, "k", b"", b"", frozenset()), "__dict__")
+    assert not hasattr(Outcome(True, False, False, False, 1.0, "k", b"", b"", frozenset()), "__dict__")
 
 
 def test_a_simulate_json_of_a_sweeps_set_up_reads_as_run_with_its_settings(tmp_path, capsys):

@@ -141,6 +141,11 @@ def test_every_compare_field_is_documented(outputs, tmp_path):
     names += [*versus["success"], *report["settings_differ"]["other"][0]]
     assert report["settings_differ"]["other"][0]["setting"] == "env.time_limit"
     assert _undocumented(names, _documented()) == []
+    # each rate and paired figure named in compare's own section: `discomfort` is a record field above, so a
+    # compare that paired it undocumented passed the check over the whole page
+    section = DOC.read_text().split("## `crowdmpc compare", 1)[1].split("\n## ", 1)[0]
+    named = set(re.findall(r"`([^`\s]+)`", section))
+    assert _undocumented([*group["runs"]["sw"]["rates"], *versus, *versus["text"]], named) == []
 
 
 def test_every_channel_schema_and_metadata_key_of_a_recording_is_documented(outputs):

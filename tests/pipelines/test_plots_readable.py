@@ -237,7 +237,13 @@ def test_a_missing_point_across_crowd_sizes_is_marked_where_it_would_stand(outco
 def _versus(difference: float) -> dict:
     flag = {"difference_pp": difference, "interval_pp": [difference - 10.0, difference + 10.0]}
     travel = {"mean": 1.0, "half_width_95": 0.5, "n": 2}
-    return {"success": flag, "collision": flag, "contact": flag, "travel_difference": travel}
+    return {
+        "success": flag,
+        "collision": flag,
+        "contact": flag,
+        "discomfort": flag,
+        "travel_difference": travel,
+    }
 
 
 def _report(groups: list[tuple[str, int]]) -> dict:
@@ -260,6 +266,27 @@ def test_compare_plots_the_sizes_run_on_whole_ticks_within_a_page():
         assert [t.get_text() for t in ax.get_xticklabels()] == ["5", "7"]
         assert all(line.get_linestyle() == "None" for line in ax.get_lines() if line.get_marker() == "o")
     assert len(fig.legends) == 1 and [t.get_text() for t in fig.legends[0].get_texts()] == ["CMPC: b − a"]
+
+
+def test_compare_draws_a_panel_for_each_of_the_papers_rates_and_travel_time():
+    """Discomfort, one of the paper's metrics, had no panel: success, collision, contact and travel time
+    only. Five panels now, the rates in percentage points and travel time last, two to a row; no empty frame
+    in the sixth place."""
+    report = _report([("CMPC", 5)])
+    report["groups"][0]["versus_first"]["b"]["discomfort"] = {"difference_pp": -25.0, "interval_pp": [-60, 5]}
+    fig = compare_figure(report)
+    _drawn(fig)
+    titles = [ax.get_title() for ax in fig.axes]
+    assert titles == [
+        "success (pp)",
+        "collision (pp)",
+        "contact (pp)",
+        "discomfort (pp)",
+        "travel time (s), both completed",
+    ]
+    (point,) = [line for line in fig.axes[3].get_lines() if line.get_marker() == "o"]
+    assert list(point.get_ydata()) == [-25.0]
+    assert fig.get_size_inches()[0] <= MAX_WIDTH_IN
 
 
 def test_compare_of_one_group_names_it_in_full_off_the_panel_edges():
