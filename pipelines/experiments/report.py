@@ -142,6 +142,7 @@ def episode_row(r: dict[str, Any], method: str) -> dict[str, Any]:
         "key": r["key"],
         "method": method,
         "n_humans": r["n_humans"],
+        "n_robots": r.get("n_robots"),  # a hand-made or foreign line without it: an empty cell, not a refusal
         "scenario": r["scenario"],
         "seed": r["seed"],
         "success": m["success"],
@@ -151,8 +152,10 @@ def episode_row(r: dict[str, Any], method: str) -> dict[str, Any]:
         "discomfort": m["discomfort"],
         "min_distance": m["min_distance"],
         "n_steps": m["n_steps"],
-        # Absent from records written before them: empty cells, not a failed report.
-        **{k: m.get(k) for k in ("collision_steps", "contact_steps")},
+        # Absent from records written before them: empty cells, not a failed report. discomfort_steps, which
+        # cells.csv's discomfort_step_freq counts, beside them (a record of any version has it; still read
+        # with get, as the others).
+        **{k: m.get(k) for k in ("collision_steps", "contact_steps", "discomfort_steps")},
         **{k: m.get(k) for k in BETWEEN_STEPS},
         **{k: m.get(k) for k in ROBOT_CONTACT},
         **{k: r.get(k) for k in ("margins", "profile", "visibility", "sensor_range", "sensor_tracks")},

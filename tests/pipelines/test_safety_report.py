@@ -136,6 +136,33 @@ def test_cells_and_episodes_csv_carry_the_new_columns(tmp_path):
     assert episodes[3]["margins"] == "cp0.5"
 
 
+def test_episodes_csv_has_the_team_and_the_discomfort_steps_that_cells_csv_counts(tmp_path):
+    """episodes.csv had neither `n_robots` (a --robots sweep's rows did not say their team) nor
+    `discomfort_steps`, whose sum over a cell's states is cells.csv's `discomfort_step_freq` (20 % for "none":
+    6 + 0 + 6 of 60 states). A record without them (hand-made, or older) leaves its cells empty."""
+    safety, cells, records = _safety_records()
+    for r in records[:3]:
+        r["n_robots"] = 3
+    write_report(tmp_path, safety, cells, records)
+    with open(tmp_path / EPISODES_CSV, encoding="utf-8") as f:
+        episodes = list(csv.DictReader(f))
+    assert [(e["n_robots"], e["discomfort_steps"]) for e in episodes[:4]] == [
+        ("3", "6"),
+        ("3", "0"),
+        ("3", "6"),
+        ("", "0"),
+    ]
+    states = sum(int(e["n_steps"]) + 1 for e in episodes[:3])
+    with open(tmp_path / CELLS_CSV, encoding="utf-8") as f:
+        first = next(csv.DictReader(f))
+    assert float(first["discomfort_step_freq"]) == pytest.approx(100 * 12 / states)
+    old = _safety_records(old=True)
+    (tmp_path / "old").mkdir()
+    write_report(tmp_path / "old", *old)
+    with open(tmp_path / "old" / EPISODES_CSV, encoding="utf-8") as f:
+        assert {(e["n_robots"], e["discomfort_steps"]) for e in csv.DictReader(f)} == {("", "")}
+
+
 def test_old_records_without_the_new_keys_still_report(tmp_path):
     safety, cells, records = _safety_records(old=True)
     report = write_report(tmp_path, safety, cells, records)
