@@ -16,6 +16,9 @@ from pipelines.logs.review import count, fmt, text_table
 from pipelines.loop.record import step_time_stats
 
 _RUN_COLUMNS: Final = ("success", "collision", "timeout", "travel_time", "min_distance")
+# Each column's header: the metric's name, then its unit as the table's "median ms" and table.md's
+# "Average travel time (s)" give theirs; the flags are yes or no.
+_RUN_HEADERS: Final = ("success", "collision", "timeout", "travel_time s", "min_distance m")
 
 
 def aggregate_table(
@@ -29,7 +32,7 @@ def aggregate_table(
         "file",
         "controller",
         "predictor",
-        *_RUN_COLUMNS,
+        *_RUN_HEADERS,
         "ended",  # what ended it: the timeout column is the metric, not success
         "median ms",
         "p95 ms",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import sys
 
@@ -481,6 +482,17 @@ def test_a_run_summary_names_the_units_of_its_metrics(runs, capsys):
     for name, unit in (("travel_time", "s"), ("min_distance", "m"), ("path_length", "m")):
         assert any(line.split()[:2] == [name, f"({unit})"] for line in lines), name
     assert any(line.split()[:2] == ["success", "yes" if metrics.success else "no"] for line in lines)
+
+
+def test_a_folders_table_names_the_units_of_its_columns(runs):
+    """review DIR's row per file headed its columns `travel_time` and `min_distance`, no unit, where the
+    same table's step times read "median ms" and the set-ups' table "mean travel time s"."""
+    from pipelines.logs.run_tables import aggregate_table
+
+    text, _ = aggregate_table([summarize(read_recording(r.path)) for r in runs], [])
+    header = re.split(r"\s{2,}", text.splitlines()[0].strip())  # columns two spaces apart at least
+    assert "travel_time s" in header and "min_distance m" in header
+    assert "travel_time" not in header and "min_distance" not in header
 
 
 def test_a_recording_of_another_format_is_reviewed_with_a_warning(tmp_path, capsys, monkeypatch):
