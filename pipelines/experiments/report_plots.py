@@ -126,8 +126,8 @@ def _values(cells: Sequence[CellSummary], name: str) -> tuple[np.ndarray, np.nda
         return y, np.vstack([half, half])
     rates = [_rate(s, name) for s in cells]
     y = np.array([math.nan if r is None else r.percent for r in rates], dtype=float)
-    bounds = np.array([(math.nan, math.nan) if r is None else r.interval for r in rates], dtype=float)
-    return y, np.abs(bounds.reshape(-1, 2).T - y)
+    low, high = np.array([(math.nan, math.nan) if r is None else r.interval for r in rates], dtype=float).T
+    return y, np.vstack([y - low, high - y])  # Wilson's bounds hold the rate: both lengths are >= 0
 
 
 def _rate(s: CellSummary, name: str) -> Rate | None:

@@ -205,9 +205,10 @@ def _draw_point(ax: Any, s: SafetyColumn, style: dict[str, str], named: bool) ->
     ax.errorbar(
         x,
         y,
-        # Clipped at 0: at a rate of exactly 0 or 100 % the Wilson bound can round past it.
-        xerr=[[max(0.0, x - x_lo)], [max(0.0, x_hi - x)]],
-        yerr=[[max(0.0, y - y_lo)], [max(0.0, y_hi - y)]],
+        # Wilson's bounds hold the rate between them, and are exactly 0 and 100 % at 0 and n of n
+        # (summary.wilson_interval): no bar reaches past the point.
+        xerr=[[x - x_lo], [x_hi - x]],
+        yerr=[[y - y_lo], [y_hi - y]],
         fmt=style.get("marker", "o"),
         color=style.get("color"),
         capsize=3,
