@@ -48,6 +48,7 @@ def run_cells(
     ``log``: given every record of the log, those held and those this run appends; ``models``: the plan's
     checks' reads, whose weights and calibration blocks the workers take."""
     from pipelines.experiments.sweep import run_sweep
+    from pipelines.experiments.sweep_stop import cut_note
 
     status, records = 0, None if log is None else log.add
     weights, blocks = (None, None) if models is None else (models.weights(), models.calibrations())
@@ -78,6 +79,6 @@ def run_cells(
     elif outcome.interrupted:  # no backend: stopped while it started (joining a cluster), before any episode
         again = "resume" if outcome.backend or outcome.already_done else "start it"
         why = "" if outcome.backend else " (stopped while its workers started: no episode ran this run)"
-        print(f"interrupted: rerun the same command to {again}{why}", file=sys.stderr)
+        print(f"interrupted: rerun the same command to {again}{why}{cut_note(outcome.cut)}", file=sys.stderr)
         status = INTERRUPTED
     return status, outcome.workers

@@ -47,7 +47,7 @@ from pipelines.experiments.reuse import check_source, seed_from
 from pipelines.experiments.run_lines import lost_runs, split_lost, write_sweep_file
 from pipelines.experiments.sweep_config import SweepConfig
 from pipelines.experiments.sweep_folder import check_sweep_directory, sweep_lock
-from pipelines.experiments.sweep_stop import keep_finished
+from pipelines.experiments.sweep_stop import cut_note, keep_finished
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import make_scratch_root, release_scratch_root
 from pipelines.loop.interrupt import terminate_as_interrupt
@@ -70,6 +70,7 @@ class SweepOutcome:
     backend: str = ""
     workers: int | None = None  # episodes the backend ran at once; None: none started, or it did not say
     interrupted: bool = False
+    cut: int = 0  # at an interrupt, episodes in flight on the workers cut unrecorded (a resume runs them)
 
     @property
     def complete(self) -> bool:
@@ -290,9 +291,9 @@ def _run_tasks(
     FAIL_FAST_ERRORS episodes not ``retried`` (keys that raised in an earlier run) have raised: a broken
     method or setting, also when it extends a sweep; old failures raising again tell nothing new, and run
     after the new episodes. Stop too at a worker's ``stop`` (weights replaced since the driver checked them):
-    every later episode of that predictor met it, one error each. At a stop, the episodes the other workers
-    hand back within a bound are written first (pipelines.experiments.sweep_stop), and the SweepStopped
-    carries the workers the backend ran at once, for the report's projection."""
+    every later episode of that predictor met it, one error each. At a stop, an interrupt's too, the episodes
+    the other workers hand back within a bound are written first (pipelines.experiments.sweep_stop), and the
+    SweepStopped carries the workers the backend ran at once, for the report's projection."""
     out = Path(config.out)
     by_key = {t.key: t for t in todo}
     start = time.perf_counter()
@@ -316,10 +317,13 @@ def _run_tasks(
                     _fail_fast(outcome, retried, result.error, out)
         except SweepStopped as stopped:  # the backend's (a lost cluster, dying workers) or _fail_fast's
             # what the other workers finished is written first (pipelines.experiments.sweep_stop)
-            cut = keep_finished(backend, keep)
+            cut = cut_note(keep_finished(backend, keep))
             raise SweepStopped(f"{stopped}{cut}", outcome.workers) from None
+        except KeyboardInterrupt:  # Ctrl-C, SIGTERM: a stop too; a second one ends the wait at once
+            outcome.cut = keep_finished(backend, keep, functools.partial(bar.write, file=sys.stderr))
+            raise
         if refusal is not None:
-            cut = keep_finished(backend, keep)  # before the count of the episodes recorded
+            cut = cut_note(keep_finished(backend, keep))  # before the count of the episodes recorded
             recorded = outcome.already_done + outcome.ran
             raise SweepStopped(stopped_by(refusal, recorded, out) + cut, outcome.workers)
     finally:

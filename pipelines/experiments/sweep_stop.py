@@ -9,6 +9,16 @@ lost). Now the driver writes what the backend's ``finished`` gives back within `
 one's own without it: nothing), as it writes every outcome; the episodes still running then are cut, and
 the stop's line says how many, which a resume runs. The stop also carries the workers the backend ran at
 once (``SweepStopped.workers``): the report's CPU projection divides by them, as a finished run's does.
+
+An interrupt (Ctrl-C, or SIGTERM and SIGHUP taken as one: pipelines.loop.interrupt) is such a stop too. The
+driver closed the backend at once, and the episodes its workers were running were lost, however near their
+end (`sweep --workers 2` on Table II with constant velocity, episodes of about a second: Ctrl-C cut the two
+running). Now it says so and waits for them, as at any other stop; a second interrupt ends the wait at
+once (raised inside ``finished``), and the line that asks for a rerun counts the episodes cut. A
+SIGTERM or SIGHUP sent to the sweep's whole process group (`timeout`, a closed terminal) reaches the process
+pool's workers as well, which end at once: they ignore SIGINT only, since the pool's own clean-up of a broken
+pool ends them by SIGTERM and joins them without a bound. Their episodes are cut, and the wait ends as their
+futures fail (`timeout 15 crowdmpc sweep --workers 2 ...`: the two episodes running cut).
 """
 
 from __future__ import annotations
@@ -24,15 +34,26 @@ from predictors.text_table import counted
 STOP_WAIT_S: Final[float] = 5.0
 
 
-def keep_finished(backend: Any, keep: Callable[[EpisodeOutcome], None]) -> str:
-    """Write (``keep``) each outcome ``backend`` gives back within STOP_WAIT_S of a stop; the stop line's
-    tail that counts the episodes cut. Another worker's refusal (``stop``) ran nothing and is not written."""
+def keep_finished(
+    backend: Any, keep: Callable[[EpisodeOutcome], None], say: Callable[[str], None] | None = None
+) -> int:
+    """Write (``keep``) each outcome ``backend`` gives back within STOP_WAIT_S of a stop; the episodes cut
+    (``cut_note`` says them). Another worker's refusal (``stop``) ran nothing and is not written. ``say``:
+    told first that the wait begins, where the backend waits (an interrupt's: otherwise the user's Ctrl-C
+    met seconds of silence, and a second one, which stops at once, lost what the wait would keep)."""
     finished = getattr(backend, "finished", None)
-    back, cut = finished(STOP_WAIT_S) if finished is not None else ([], 0)
+    if finished is None:  # a backend of one's own, or inline: its episode ran in the driver, cut there
+        return 0
+    if say is not None:
+        say(
+            f"interrupted: recording the episodes the workers finish within {STOP_WAIT_S:g} s; interrupt "
+            "again to stop at once"
+        )
+    back, cut = finished(STOP_WAIT_S)
     for outcome in back:
         if outcome.stop is None:
             keep(outcome)
-    return cut_note(cut)
+    return int(cut)
 
 
 def cut_note(cut: int) -> str:

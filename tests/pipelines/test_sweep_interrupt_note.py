@@ -11,17 +11,24 @@ from pipelines.experiments.sweep import SweepOutcome
 
 
 @pytest.mark.parametrize(
-    ("done", "said"),
+    ("done", "cut", "said"),
     [
-        (4, "interrupted after every planned episode was recorded: the report follows"),
-        (3, "interrupted: rerun the same command to resume"),
+        (4, 0, "interrupted after every planned episode was recorded: the report follows"),
+        (3, 0, "interrupted: rerun the same command to resume\n"),
+        (
+            2,
+            2,
+            "interrupted: rerun the same command to resume; 2 episodes in flight on the workers were cut "
+            "unrecorded (a resume runs them)",
+        ),
     ],
 )
 def test_a_sweep_interrupted_after_its_last_episode_says_nothing_is_left(
-    done, said, tmp_path, monkeypatch, capsys
+    done, cut, said, tmp_path, monkeypatch, capsys
 ):
-    """A Ctrl-C that came after "4/4 episodes recorded" printed "rerun the same command to resume"."""
-    outcome = SweepOutcome(planned=4, already_done=0, ran=done, backend="process", interrupted=True)
+    """A Ctrl-C that came after "4/4 episodes recorded" printed "rerun the same command to resume"; one
+    whose wait for the workers' episodes (pipelines.experiments.sweep_stop) cut some says how many."""
+    outcome = SweepOutcome(planned=4, already_done=0, ran=done, backend="process", interrupted=True, cut=cut)
     monkeypatch.setattr(
         "pipelines.experiments.sweep.run_sweep",
         lambda config, records=None, weights=None, calibrations=None: outcome,

@@ -1,9 +1,10 @@
-"""A sweep that stops part way (a worker's refusal of replaced weights, a lost Ray cluster) keeps the episodes
-its other workers finish: the driver stopped at once and closed the backend, and those episodes ended
-unrecorded, for a rerun to run again (pipelines.experiments.sweep_stop)."""
+"""A sweep that stops part way (a worker's refusal of replaced weights, a lost Ray cluster, Ctrl-C or `kill`)
+keeps the episodes its other workers finish: the driver stopped at once and closed the backend, and those
+episodes ended unrecorded, for a rerun to run again (pipelines.experiments.sweep_stop)."""
 
 from __future__ import annotations
 
+import os
 import time
 import types
 from pathlib import Path
@@ -77,6 +78,53 @@ def test_a_stop_waits_a_bounded_time_and_says_how_many_episodes_it_cut(
     assert err == _stopped_at(tmp_path, f"no episode of it is recorded in {tmp_path} yet") + (
         "; 1 episode in flight on the workers was cut unrecorded (a resume runs it)"
     )
+    log = tmp_path / EPISODES_FILE
+    assert not log.exists() or not log.read_text()
+
+
+@pytest.mark.parametrize("backend", ["process", "ray"])
+@pytest.mark.parametrize(("sent", "status"), [("INT", 130), ("TERM", 143)])
+def test_an_interrupted_sweep_records_the_episodes_its_workers_finish(
+    backend, sent, status, tmp_path, plugins, capsys, monkeypatch
+):
+    """`--workers 2`, Ctrl-C (or `kill`) while both workers ran an episode a second from its end: the driver
+    closed the backend at once and both were lost (a Table II sweep's two, each about a second from its end).
+    Now they are recorded, and the episode still running when the wait ends (here: a minute's, which the
+    first worker to finish took up) is cut, the line asking for a rerun says so."""
+    if backend == "ray":
+        pytest.importorskip("ray")  # the [cluster] extra
+    monkeypatch.setenv("CROWDMPC_TEST_DRIVER", str(os.getpid()))
+    monkeypatch.setenv("CROWDMPC_TEST_SIGNAL", sent)
+    interrupts, slow, sleeps = plugins("InterruptsTheSweep", "TakesASecond", "SleepsInReset")
+    start = time.monotonic()
+    assert main(_sweep(tmp_path, [interrupts, slow, sleeps], backend)) == status
+    assert time.monotonic() - start < 45  # the workers' start, the wait, and their end: not the minute
+    err = capsys.readouterr().err.strip().splitlines()
+    records = EpisodeLog(tmp_path / EPISODES_FILE).load()
+    assert sorted(r["controller"] for r in records.values()) == ["interrupts_the_sweep", "takes_a_second"]
+    said = (
+        "interrupted: recording the episodes the workers finish within 5 s; interrupt again to stop at once"
+    )
+    assert said in err
+    assert (
+        "interrupted: rerun the same command to resume; 1 episode in flight on the workers was cut "
+        "unrecorded (a resume runs it)"
+    ) in err
+    assert (tmp_path / "table.md").exists()  # the report of what it recorded
+
+
+def test_a_second_interrupt_ends_the_wait_at_once(tmp_path, plugins, capsys, monkeypatch):
+    """The wait for the workers' episodes is the first interrupt's: a second one stops the sweep at once, as
+    the docs promise, whatever is still running."""
+    monkeypatch.setattr(sweep_stop, "STOP_WAIT_S", 300.0)
+    monkeypatch.setenv("CROWDMPC_TEST_DRIVER", str(os.getpid()))
+    twice, sleeps = plugins("InterruptsTheSweepTwice", "SleepsInReset")
+    start = time.monotonic()
+    assert main(_sweep(tmp_path, [twice, sleeps], "process")) == 130
+    assert time.monotonic() - start < 45  # not the wait's 300 s, nor the episodes' minute
+    err = capsys.readouterr().err
+    assert "within 300 s; interrupt again to stop at once" in err
+    assert "interrupted: rerun the same command to resume" in err
     log = tmp_path / EPISODES_FILE
     assert not log.exists() or not log.read_text()
 

@@ -2,7 +2,7 @@
 segfault in a library or the kernel's OOM killer would), ``RaisesOnCircles`` raises on the circle crossings
 (every other episode of a cell, on every run), ``SetInDescribe`` describes itself with a set (no JSON);
 ``RaisesIn...`` raise in one method each, ``InterruptedInAct`` is Ctrl-C in act, ``HangsOnCircles`` never
-returns from act on the circle crossings."""
+returns from act on the circle crossings; ``InterruptsTheSweep`` sends its sweep's driver a Ctrl-C."""
 
 from __future__ import annotations
 
@@ -154,5 +154,35 @@ class SleepsInReset(StraightLine):
     name = "sleeps_in_reset"
 
     def reset(self, obs: Observation) -> None:
+        time.sleep(60.0)
+        super().reset(obs)
+
+
+class InterruptsTheSweep(StraightLine):
+    """Sends the sweep's driver (``$CROWDMPC_TEST_DRIVER``, a pid: a Ray actor's parent is no driver) SIGINT,
+    as a Ctrl-C in its terminal does (the workers ignore theirs), or the signal ``$CROWDMPC_TEST_SIGNAL``
+    names (TERM: `kill`, `timeout`), then takes a second more: an episode near its end when the user stops
+    the sweep, back within the stop's wait."""
+
+    name = "interrupts_the_sweep"
+
+    def reset(self, obs: Observation) -> None:
+        sent = signal.Signals["SIG" + os.environ.get("CROWDMPC_TEST_SIGNAL", "INT")]
+        os.kill(int(os.environ["CROWDMPC_TEST_DRIVER"]), sent)
+        time.sleep(1.0)
+        super().reset(obs)
+
+
+class InterruptsTheSweepTwice(StraightLine):
+    """Ctrl-C to the driver (as InterruptsTheSweep), a second one a second later (a user who will not wait),
+    then a minute's run."""
+
+    name = "interrupts_the_sweep_twice"
+
+    def reset(self, obs: Observation) -> None:
+        driver = int(os.environ["CROWDMPC_TEST_DRIVER"])
+        os.kill(driver, signal.SIGINT)
+        time.sleep(1.0)
+        os.kill(driver, signal.SIGINT)
         time.sleep(60.0)
         super().reset(obs)
