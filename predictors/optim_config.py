@@ -7,9 +7,10 @@ from __future__ import annotations
 import math
 import numbers
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 
 from predictors.errors import PredictorError
+from predictors.nets.config_checks import config_from_dict
 from predictors.nets.losses import VARIETY_ERRORS
 
 LOSSES = ("gaussian", "l2")
@@ -38,13 +39,7 @@ class OptimConfig:
             raise PredictorError(
                 f"an optimiser config is an OptimConfig or a dict of its fields, got {type(values).__name__}"
             )
-        known = [f.name for f in fields(cls)]
-        unknown = sorted(str(key) for key in values if key not in known)
-        if unknown:
-            raise PredictorError(
-                f"unknown optimiser config keys {unknown}; expected a subset of {sorted(known)}"
-            )
-        return cls(**values)
+        return config_from_dict(cls, dict(values), "optimiser")  # the nets' configs' rule and words
 
     def __post_init__(self):
         for key, value in asdict(self).items():  # "1e-3" from a YAML file met a bare TypeError below

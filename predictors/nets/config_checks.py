@@ -67,11 +67,12 @@ def config_to_dict(config: Any) -> dict:
 
 
 def config_from_dict(cls: type[T], values: object, label: str) -> T:
-    """``cls(**values)``, refusing anything but a JSON object of ``cls``'s field names."""
+    """``cls(**values)``, refusing anything but a JSON object of ``cls``'s field names (named in str's order:
+    a dict built in Python may hold keys of other types beside them)."""
     if not isinstance(values, dict):
         raise PredictorError(f"a {label} config must be a JSON object, got {short_repr(values)}")
     known = {f.name for f in fields(cls)}  # type: ignore[arg-type]
-    unknown = sorted(set(values) - known)
+    unknown = sorted(set(values) - known, key=str)
     if unknown:
         raise PredictorError(
             f"unknown {label} config keys {short_repr(unknown, 200)}; expected a subset of {sorted(known)}"
