@@ -8,11 +8,12 @@ the layer's own submodules, each called as a module (``self_attn`` is ``nn.Multi
 form, ``linear1``, ``norm1``, ``activation`` ... are mapped as anywhere else), so that a refusal names the
 submodule it happens in (``encoder.layers.0.self_attn``).
 
-Under ``torch.no_grad`` torch may take its fast path instead, whose output differs in two cases: a sequence
-whose every key is padded is NaN there (here, as with gradients, the attention adds ``out_proj``'s bias
-only), and ``nn.TransformerEncoder`` with ``enable_nested_tensor`` and a padding mask that pads only the end
-of each sequence gives 0 at the padded positions (before its final norm), where the export, as torch with
-gradients, computes them as any other.
+Under ``torch.no_grad`` torch may take its fast path instead, whose output differs in three cases: a
+sequence whose every key is padded is NaN there (here, as with gradients, the attention adds ``out_proj``'s
+bias only), a float mask is read as boolean there (a nonzero entry leaves its key out, where torch with
+gradients adds it), and ``nn.TransformerEncoder`` with ``enable_nested_tensor`` and a padding mask that pads
+only the end of each sequence gives 0 at the padded positions (before its final norm), where the export, as
+torch with gradients, computes them as any other.
 """
 
 from __future__ import annotations
