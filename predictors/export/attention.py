@@ -73,16 +73,28 @@ def _check_shapes(module: nn.MultiheadAttention, q: SymTensor, k: SymTensor, v: 
     return q.ndim == 3
 
 
+def check_masks(layer: str, is_causal: bool | None, **masks: Any) -> None:
+    """ExportError where torch refuses the masks of ``nn.{layer}`` (the first of ``masks`` is the one the
+    causal hint needs): a mask is boolean (True left out) or floating (added), as torch's F._canonical_mask
+    takes it, and ``is_causal`` is a hint about a mask given, not a mask (torch's attention raises alike)."""
+    for name, mask in masks.items():
+        if isinstance(mask, torch.Tensor) and not (mask.dtype == torch.bool or mask.is_floating_point()):
+            raise ExportError(
+                f"nn.{layer} {name} of dtype {mask.dtype} (bool or floating, as torch)", current_module()
+            )
+    name, mask = next(iter(masks.items()))
+    if is_causal and mask is None:
+        raise ExportError(
+            f"nn.{layer} with is_causal=True and no {name} (torch needs the mask with the hint)",
+            current_module(),
+        )
+
+
 def _additive(mask: Any, name: str, shapes: tuple[tuple[int, ...], ...]) -> SymTensor | None:
     """``mask`` as the float mask torch adds to the scores (its _canonical_mask): a boolean one's True
     entries (left out) -inf, its False ones 0; a float one as it is."""
     if mask is None:
         return None
-    if isinstance(mask, torch.Tensor) and not (mask.dtype == torch.bool or mask.is_floating_point()):
-        raise ExportError(
-            f"nn.MultiheadAttention {name} of dtype {mask.dtype} (bool or floating, as torch)",
-            current_module(),
-        )
     m = lift(mask)
     _expect(m.shape_ in shapes, name, m.shape_, " or ".join(str(s) for s in shapes))
     return where(m, -math.inf, 0.0) if m.is_bool else m
@@ -136,11 +148,7 @@ def multihead_attention(
         q, k, v = (unsqueeze(x, 1) for x in (q, k, v))
         key_padding_mask = None if key_padding_mask is None else unsqueeze(lift(key_padding_mask), 0)
     (length, batch, width), source, heads = q.shape_, k.shape_[0], module.num_heads
-    if is_causal and attn_mask is None:
-        raise ExportError(
-            "nn.MultiheadAttention with is_causal=True and no attn_mask (torch needs the mask with the hint)",
-            current_module(),
-        )
+    check_masks("MultiheadAttention", is_causal, attn_mask=attn_mask, key_padding_mask=key_padding_mask)
     # torch drops a causal hint's mask for its own only without a padding mask or weights, and keeps it else
     causal = is_causal and key_padding_mask is None and not need_weights
     padding = _additive(key_padding_mask, "key_padding_mask", ((batch, source),))

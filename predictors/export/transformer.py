@@ -20,20 +20,11 @@ from __future__ import annotations
 
 from typing import Any
 
-import torch
 from torch import nn
 
+from predictors.export.attention import check_masks
 from predictors.export.errors import ExportError, current_module
 from predictors.export.symbolic import lift
-
-
-def _check_masks(layer: str, masks: dict[str, Any]) -> None:
-    """torch's F._canonical_mask: a mask is boolean (True left out) or floating (added)."""
-    for name, mask in masks.items():
-        if isinstance(mask, torch.Tensor) and not (mask.dtype == torch.bool or mask.is_floating_point()):
-            raise ExportError(
-                f"nn.{layer} {name} of dtype {mask.dtype} (bool or floating, as torch)", current_module()
-            )
 
 
 def transformer_encoder_layer(
@@ -45,8 +36,8 @@ def transformer_encoder_layer(
 ) -> Any:
     """``module(src, src_mask, src_key_padding_mask, is_causal)`` in eval mode (its dropouts do nothing),
     batch first or not, one sequence or a batch, norm first or last."""
-    _check_masks(
-        "TransformerEncoderLayer", {"src_mask": src_mask, "src_key_padding_mask": src_key_padding_mask}
+    check_masks(
+        "TransformerEncoderLayer", is_causal, src_mask=src_mask, src_key_padding_mask=src_key_padding_mask
     )
     width = module.self_attn.embed_dim
     shape = lift(src).shape_
@@ -55,12 +46,6 @@ def transformer_encoder_layer(
         raise ExportError(
             f"nn.TransformerEncoderLayer src of shape {shape} (expected (S, E) or {order} with E = d_model = "
             f"{width}, as torch)",
-            current_module(),
-        )
-    if is_causal and src_mask is None:  # torch's attention raises the same: the hint is not a mask
-        raise ExportError(
-            "nn.TransformerEncoderLayer with is_causal=True and no src_mask (torch needs the mask with the "
-            "hint)",
             current_module(),
         )
 
@@ -95,12 +80,7 @@ def transformer_encoder(
     is_causal: bool | None = None,
 ) -> Any:
     """``module(src, mask, src_key_padding_mask, is_causal)``: its layers in turn, then its norm if any."""
-    _check_masks("TransformerEncoder", {"mask": mask, "src_key_padding_mask": src_key_padding_mask})
-    if is_causal and mask is None:
-        raise ExportError(
-            "nn.TransformerEncoder with is_causal=True and no mask (torch needs the mask with the hint)",
-            current_module(),
-        )
+    check_masks("TransformerEncoder", is_causal, mask=mask, src_key_padding_mask=src_key_padding_mask)
     # is_causal=None asks torch to compare the mask with the causal one (a symbolic mask cannot be compared);
     # what it finds only chooses how torch applies that same mask, so False gives the same values.
     causal = is_causal is True
