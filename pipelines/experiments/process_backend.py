@@ -226,6 +226,7 @@ class ProcessBackend:
             raise SweepStopped(self._died_starting()) from None
         self._pool_ended = False
         self._drained = False
+        self._in_flight: dict[Future[EpisodeOutcome], EpisodeTask] = {}  # the run's (``run``, ``finished``)
 
     def _died_starting(self) -> str:
         """Why no worker started. Each spawned worker imports the driver's main script before anything else:
@@ -251,8 +252,8 @@ class ProcessBackend:
         self._drained = False  # until this run's episodes have all come back
         pending = iter(tasks)
         unsent: list[EpisodeTask] = []  # taken from ``pending`` but refused by a pool that broke meanwhile
-        in_flight: dict[Future[EpisodeOutcome], EpisodeTask] = {}  # handed to the pool, not yielded yet
-        self._in_flight = in_flight  # what ``finished`` takes when the driver stops the sweep
+        # handed to the pool, not yielded yet: ``finished`` takes them at a stop
+        in_flight = self._in_flight = {}
         breaks = 0  # pool breaks since an episode last came back
         while True:
             broken = self._submit(in_flight, unsent, pending)
@@ -313,7 +314,7 @@ class ProcessBackend:
         for: nothing of them ran, and a worker that frees up must not start one."""
         from concurrent.futures import wait
 
-        in_flight = getattr(self, "_in_flight", {})
+        in_flight = self._in_flight
         taken = [future for future in in_flight if not future.cancel()]
         wait(taken, timeout=wait_s)
         # a future failed by the pool (a worker died meanwhile) finished no episode: cut with the running ones
