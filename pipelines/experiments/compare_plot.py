@@ -135,7 +135,7 @@ def _settings_lines(report: Mapping[str, Any]) -> list[str]:
     """Under the title, what each run after the first ran with otherwise (``settings_differ``: its first
     settings named, the rest counted), or that it ran with the first's: the figure named the runs by their
     labels alone, so a PNG of the paper's predictor against constant velocity did not say what changed.
-    None for a report without them."""
+    No line for a report without ``settings_differ``."""
     first = report["runs"][0]["label"]
     lines = []
     for label, rows in report.get("settings_differ", {}).items():

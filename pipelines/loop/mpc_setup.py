@@ -225,7 +225,8 @@ def check_contact_distance(world: WorldFacts, cfg: MPCConfig, radius_settable: b
     needs (d_min / 2) is below the world's least (crowdsim.world.LEAST), which is refused: the offer stood
     at radius 2e-06 for d_min 1e-07, and at the default 0.3 for d_min 1e-09."""
     contact = 2.0 * world.radius
-    # the least radius itself passes the check below, as a smaller one would for this d_min
+    # a smaller radius helps only down to d_min / 2, which [world] radius must itself allow (at least LEAST):
+    # with a d_min below twice the least, no radius it takes passes the check below
     smaller = radius_settable and cfg.d_min >= 2.0 * LEAST["radius"][0] - 1e-12
     if cfg.d_min < contact - 1e-12:
         raise PipelineError(
