@@ -14,23 +14,7 @@ import pytest
 from pipelines.cli import main
 from pipelines.experiments import sweep_stop
 from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, EpisodeLog
-
-FAILING = "tests.plugins.failing_controllers"
-
-
-@pytest.fixture
-def plugins(monkeypatch):
-    """Register ``failing_controllers``' plugins here and for the workers; none left after."""
-    from pipelines.loop import spec as registry
-
-    monkeypatch.setattr(registry, "_PLUGINS", {})
-
-    def register(*names: str) -> list[str]:
-        specs = [f"{FAILING}:{name}" for name in names]
-        registry.register_controller_plugins(specs)
-        return specs
-
-    return register
+from tests.pipelines.test_sweep import plugins  # noqa: F401 (a fixture)
 
 
 def _sweep(out: Path, controllers: list[str], backend: str) -> list[str]:
@@ -48,7 +32,7 @@ def _stopped_at(out: Path, recorded: str) -> str:
 
 
 @pytest.mark.parametrize("backend", ["process", "ray"])
-def test_a_stopped_sweep_records_the_episode_another_worker_finishes(backend, tmp_path, plugins, capsys):
+def test_a_stopped_sweep_records_the_episode_another_worker_finishes(backend, tmp_path, plugins, capsys):  # noqa: F811
     """`--workers 2`, weights replaced in the zoo while the other worker ran an episode of a cell it had built
     (on the weights checked): the refusal stopped the sweep and closed the backend at once, and that episode,
     back a moment later, was lost (met in a Table II sweep: 3 episodes in flight came back within 5 s)."""
@@ -65,7 +49,10 @@ def test_a_stopped_sweep_records_the_episode_another_worker_finishes(backend, tm
 
 
 def test_a_stop_waits_a_bounded_time_and_says_how_many_episodes_it_cut(
-    tmp_path, plugins, capsys, monkeypatch
+    tmp_path,
+    plugins,  # noqa: F811
+    capsys,
+    monkeypatch,
 ):
     """An episode still running when the stop's wait ends is cut, unrecorded, and the stop's line says so:
     "rerun to resume" alone did not say that the episodes in flight were lost with the stop."""
