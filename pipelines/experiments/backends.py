@@ -56,7 +56,9 @@ GCS_GONE_S: Final[float] = 20.0
 
 class Backend(Protocol):
     name: str
-    # (and, where it says, ``workers``: how many episodes it runs at once, Ray's those the cluster fits)
+    # (and, where it says, ``workers``: how many episodes it runs at once, Ray's those the cluster fits; where
+    # it has one, ``finished(wait_s)``: at a stop, the outcomes of its episodes in flight that come back
+    # within wait_s, and how many others it cut, which pipelines.experiments.sweep_stop writes and counts)
 
     def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
         """Outcomes in completion order."""
