@@ -72,7 +72,13 @@ def test_a_stop_waits_a_bounded_time_and_says_how_many_episodes_it_cut(
 @pytest.mark.parametrize("backend", ["process", "ray"])
 @pytest.mark.parametrize(("sent", "status"), [("INT", 130), ("TERM", 143)])
 def test_an_interrupted_sweep_records_the_episodes_its_workers_finish(
-    backend, sent, status, tmp_path, plugins, capsys, monkeypatch
+    backend,
+    sent,
+    status,
+    tmp_path,
+    plugins,  # noqa: F811
+    capsys,
+    monkeypatch,
 ):
     """`--workers 2`, Ctrl-C (or `kill`) while both workers ran an episode a second from its end: the driver
     closed the backend at once and both were lost (a Table II sweep's two, each about a second from its end).
@@ -100,7 +106,7 @@ def test_an_interrupted_sweep_records_the_episodes_its_workers_finish(
     assert (tmp_path / "table.md").exists()  # the report of what it recorded
 
 
-def test_a_second_interrupt_ends_the_wait_at_once(tmp_path, plugins, capsys, monkeypatch):
+def test_a_second_interrupt_ends_the_wait_at_once(tmp_path, plugins, capsys, monkeypatch):  # noqa: F811
     """The wait for the workers' episodes is the first interrupt's: a second one stops the sweep at once, as
     the docs promise, whatever is still running."""
     monkeypatch.setattr(sweep_stop, "STOP_WAIT_S", 300.0)
