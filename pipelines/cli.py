@@ -16,6 +16,7 @@ from pipelines.errors import (
     PipelineError,
     RecordingRefused,
     interrupt_behind,
+    one_line,
     storage_refusal,
     warnings_as_notes,
 )
@@ -124,7 +125,7 @@ class OneLineParser(argparse.ArgumentParser):
         if message.startswith("unrecognized arguments:") and "--plugin goes" not in message:
             # argparse's top level says it for every command, and --plugin's hint points at the top's help
             prog = " ".join([prog, *_command(self, OneLineParser.given)])
-        self.exit(2, f"{prog}: error: {message}; see '{prog} --help'\n")
+        self.exit(2, f"{prog}: error: {one_line(message)}; see '{prog} --help'\n")
 
 
 def _command(parser: argparse.ArgumentParser, given: list[str]) -> list[str]:
@@ -292,7 +293,7 @@ def _main(argv: list[str] | None) -> int:
     try:  # before parsing: an option that names a plugin would otherwise report a broken one as its own
         load_environment_plugins()
     except PluginError as exc:
-        print(f"crowdmpc: error: {exc}", file=sys.stderr)
+        print(f"crowdmpc: error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     parser = build_parser()
     OneLineParser.given = list(sys.argv[1:] if argv is None else argv)
@@ -317,15 +318,17 @@ def _main(argv: list[str] | None) -> int:
         # episode refused, where the seed of the episode that met it is the first's (which checks every
         # planned file) and no episode to rerun
         refused = isinstance(exc.__cause__, RecordingRefused)
-        print(f"crowdmpc {command}: error: {exc.__cause__ if refused else exc}", file=sys.stderr)
+        print(
+            f"crowdmpc {command}: error: {one_line(str(exc.__cause__ if refused else exc))}", file=sys.stderr
+        )
         return 2 if refused else EPISODES_RAISED
     except user_errors() as exc:
-        print(f"crowdmpc {command}: error: {exc}", file=sys.stderr)
+        print(f"crowdmpc {command}: error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except OSError as exc:
         if (refusal := storage_refusal(exc)) is None:  # not a full disk: a bug, with its traceback
             raise
-        print(f"crowdmpc {command}: error: {refusal}", file=sys.stderr)
+        print(f"crowdmpc {command}: error: {one_line(refusal)}", file=sys.stderr)
         return 2
     except Exception as exc:
         if interrupt_behind(exc) is None:  # a bug: its traceback

@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import sys
+import unicodedata
 import warnings
 from collections.abc import Iterator
 from typing import Any, TextIO
@@ -54,6 +55,19 @@ class EpisodeFailed(PipelineError):
         # Built from its facts, as predictors.errors.DatasetFormatError: a process pool sends a job's
         # exception back pickled, and BaseException's pickle calls the class with the message alone.
         return type(self), (self.seed, self.scenario, self.error)
+
+
+def one_line(text: str) -> str:
+    """``text`` with its control characters (a newline, a carriage return, an escape sequence) and Unicode's
+    line and paragraph separators written as Python escapes (``\\n``, ``\\x1b``): the CLI's error line names
+    the user's paths and values, and a path holding a newline (``--config $'a\\nb.toml'``) ran its line over
+    two. Any other text, every ordinary message included, is returned as it is."""
+    return "".join(c.encode("unicode_escape").decode("ascii") if _breaks_line(c) else c for c in text)
+
+
+def _breaks_line(char: str) -> bool:
+    """Whether ``char`` is one ``one_line`` escapes: a C0 or C1 control, or U+2028/U+2029."""
+    return unicodedata.category(char) in ("Cc", "Zl", "Zp")
 
 
 def interrupt_behind(exc: BaseException | None) -> KeyboardInterrupt | None:

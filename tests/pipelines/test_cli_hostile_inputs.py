@@ -331,3 +331,34 @@ def test_no_command_is_usage_on_stderr(capsys):
     assert main([]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err.startswith("usage: crowdmpc") and err.endswith("error: give a COMMAND (above)\n")
+
+
+# ---- 9. paths holding control characters -----------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("argv", "expected"),
+    [
+        (
+            ["--config", "{d}/a\nb.toml", "simulate"],
+            "crowdmpc simulate: error: --config {d}/a\\nb.toml: no such file",
+        ),
+        (
+            ["sweep", "--experiment", "controllers", "--reuse", "{d}/a\nb", "--out", "{d}/o"],
+            "crowdmpc sweep: error: --reuse {d}/a\\nb: not a sweep folder "
+            "({d}/a\\nb/sweep.json does not exist)",
+        ),
+        (
+            ["review", "{d}/x\r\x1b[2Ky.mcap"],
+            "crowdmpc review: error: {d}/x\\r\\x1b[2Ky.mcap: no such recording",
+        ),
+        (
+            ["simulate", "--bogus", "a\u2028b"],
+            "crowdmpc simulate: error: unrecognized arguments: --bogus a\\u2028b; "
+            "see 'crowdmpc simulate --help'",
+        ),
+    ],
+)
+def test_a_path_with_a_line_break_stays_on_the_error_line_escaped(argv, expected, tmp_path, capsys):
+    """`crowdmpc --config $'a\\nb.toml' simulate` printed its error line over two lines: the CLI now writes
+    control characters (and U+2028) of its error line as Python escapes, the rest as it was."""
+    line = error_line(capsys, *(a.format(d=tmp_path) for a in argv))
+    assert line == expected.format(d=tmp_path)
