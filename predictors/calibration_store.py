@@ -24,7 +24,7 @@ from predictors.calibration import SOURCES, Calibration, remaking_view
 from predictors.checkpoint import read_document
 from predictors.conformal import alpha_text, check_alpha
 from predictors.durable import write_text_durably
-from predictors.errors import PredictorError, UnknownPredictor
+from predictors.errors import PredictorError, UnknownPredictor, short_repr
 from predictors.manifest import CALIBRATIONS_NAME, zoo_lock  # the zoo's own files (ZOO_FILES), its lock
 from predictors.zoo import (
     SHIPPED,
@@ -72,9 +72,10 @@ def read_calibration_file(path: Path) -> list[Calibration]:
     if not path.is_file():
         return []
     document = read_document(path, CALIBRATIONS_FORMAT, "crowdmpc calibrations file")
-    if document.get("version") != CALIBRATIONS_VERSION:
+    version = document.get("version")
+    if type(version) is not int or version != CALIBRATIONS_VERSION:  # type(): True and 1.0 are no version 1
         raise PredictorError(
-            f'{path}: unsupported "version" {document.get("version")!r}, expected {CALIBRATIONS_VERSION}'
+            f'{path}: unsupported "version" {short_repr(version)}, expected {CALIBRATIONS_VERSION}'
         )
     blocks = document.get("calibrations", [])
     if not isinstance(blocks, list):

@@ -351,6 +351,13 @@ def test_user_calibrations_go_to_the_user_zoo_and_shipped_ones_are_read_only_def
             'not a crowdmpc calibrations file .*"crowdmpc-calibrations"',
         ),
         ('{"format": "crowdmpc-calibrations", "version": 2}', 'unsupported "version" 2, expected 1'),
+        # a bool and a float where the version, an int, is meant were taken for version 1
+        ('{"format": "crowdmpc-calibrations", "version": true}', 'unsupported "version" True, expected 1'),
+        ('{"format": "crowdmpc-calibrations", "version": 1.0}', 'unsupported "version" 1.0, expected 1'),
+        (
+            '{"format": "crowdmpc-calibrations", "version": "' + "9" * 100 + '"}',
+            'unsupported "version" \'9{56}\\.\\.\\., expected 1',
+        ),
         ('{"format": "crowdmpc-calibrations", "version": 1, "calibrations": {}}', "must be a list of blocks"),
         ('{"format": "crowdmpc-calibrations", "version": 1, "calibrations": [3]}', r"calibrations\[0\]: a "),
     ],
