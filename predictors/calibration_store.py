@@ -15,13 +15,14 @@ directory's file only.
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import EllipsisType
 from typing import Final
 
 from predictors.calibration import SOURCES, Calibration, remaking_view
-from predictors.checkpoint import read_document
+from predictors.checkpoint import node_kind, read_document
 from predictors.conformal import alpha_text, check_alpha
 from predictors.durable import write_text_durably
 from predictors.errors import PredictorError, UnknownPredictor, short_repr
@@ -68,9 +69,13 @@ def zoo_calibration_files(user_dir: str | Path | None = None) -> list[tuple[str,
 
 
 def read_calibration_file(path: Path) -> list[Calibration]:
-    """Every block of one calibrations file; an absent file means none."""
-    if not path.is_file():
+    """Every block of one calibrations file; none where nothing has its name. Anything there but a regular
+    file (or a link to one) is refused: taken for absent, it let the shipped blocks be used in silence."""
+    if not os.path.lexists(path):
         return []
+    if not path.is_file():  # before any open: opening a FIFO for reading waits for a writer
+        why = f"not a regular file ({node_kind(path)}); the zoo's calibrations are read from a JSON file"
+        raise PredictorError(f"{path}: {why} of that name: move this away")
     document = read_document(path, CALIBRATIONS_FORMAT, "crowdmpc calibrations file")
     version = document.get("version")
     if type(version) is not int or version != CALIBRATIONS_VERSION:  # type(): True and 1.0 are no version 1

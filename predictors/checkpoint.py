@@ -92,6 +92,15 @@ def read_capped(path: Path, limit: int, room: str, expected: str | None = None) 
     return data
 
 
+def node_kind(path: Path) -> str:
+    """What stands at ``path`` where a regular file was expected, in words."""
+    if path.is_symlink() and not path.exists():
+        return "a symbolic link to nothing"
+    if path.is_dir():
+        return "a directory"
+    return "a FIFO" if path.is_fifo() else "a device or socket"
+
+
 def read_document(path: Path, document_format: str, what: str) -> dict[str, Any]:
     """A JSON object whose ``"format"`` is ``document_format``, or PredictorError naming ``path``."""
     return parse_document(

@@ -1,6 +1,7 @@
 import dataclasses
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -366,6 +367,38 @@ def test_malformed_file_is_explained(tmp_path, text, message):
     (tmp_path / CALIBRATIONS_NAME).write_text(text)
     with pytest.raises(PredictorError, match=f"{CALIBRATIONS_NAME}.*{message}"):
         read_calibrations(tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("make", "kind"),
+    [
+        (lambda path: path.mkdir(), "a directory"),
+        (os.mkfifo, "a FIFO"),
+        (lambda path: path.symlink_to(path.parent / "nowhere"), "a symbolic link to nothing"),
+    ],
+    ids=["directory", "fifo", "broken-link"],
+)
+def test_a_user_calibrations_file_that_is_no_file_is_refused_not_taken_for_absent(
+    tmp_path, monkeypatch, make, kind
+):
+    """A directory, FIFO or broken link at the user zoo's calibrations.json was read as no file: every run
+    used the shipped blocks in silence, and calibrate replaced the FIFO. Each read, and a store, now refuses
+    it in one line naming it (a FIFO is never opened: the read would wait for a writer)."""
+    shipped, user = tmp_path / "shipped", tmp_path / "user"
+    monkeypatch.setenv(zoo.CHECKPOINTS_ENV, str(shipped))
+    monkeypatch.setenv(zoo.ZOO_ENV, str(user))
+    save_calibration(block(), shipped)
+    user.mkdir()
+    path = user / CALIBRATIONS_NAME
+    make(path)
+    expected = f"^{path}: not a regular file \\({kind}\\); the zoo's calibrations are read from a JSON file"
+    with pytest.raises(PredictorError, match=expected):
+        read_calibrations()
+    with pytest.raises(PredictorError, match=expected):
+        find_calibration("social_lstm_eth", "real", 0.1, sha256=SHA_A)
+    with pytest.raises(PredictorError, match=expected):
+        save_calibration(block(alpha=0.2))
+    assert os.path.lexists(path) and not path.is_file()  # left as it was
 
 
 def test_bad_block_and_duplicates_in_the_file_are_explained(tmp_path):
