@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from predictors.checkpoint import CheckedPair, read_checkpoint
-from predictors.errors import CheckpointMismatch, PredictorError
+from predictors.errors import CheckpointMismatch, PredictorError, short_repr
 from predictors.home import expand_home, home_dir
 from predictors.manifest import (
     MANIFEST_NAME,
@@ -338,9 +338,9 @@ def disagreement(located: Located, config_bytes: bytes) -> str | None:
     for key, said, value in pairs:
         if value is not None and said != value:
             return (
-                f"{located.manifest}: entry {entry.name!r} says {key} {said!r}, its config {config.name} "
-                f"{value!r} (the manifest edited by hand?); add the model again with `crowdmpc zoo add "
-                "--replace`, or restore the manifest"
+                f"{located.manifest}: entry {entry.name!r} says {key} {short_repr(said)}, its config "
+                f"{config.name} {short_repr(value)} (the manifest edited by hand?); add the model again with "
+                "`crowdmpc zoo add --replace`, or restore the manifest"
             )
     return None
 

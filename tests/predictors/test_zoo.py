@@ -410,7 +410,10 @@ def test_verify_loads_each_entry_of_a_zoo_directory(shipped, user):
         ("model", "vanilla_lstm", "says model 'vanilla_lstm', its config social_lstm_eth.json 'social_lstm'"),
         ("training", {"epochs": 50}, "says training.epochs 50, its config social_lstm_eth.json 25"),
         ("training", {"limit_batches": 3}, None),  # of which the shipped config says nothing
+        # a kind of 100,000 characters was printed whole: cut as the other messages cut a file's values
+        ("model", "x" * 100_000, f"says model '{'x' * 56}..., its config social_lstm_eth.json 'social_lstm'"),
     ],
+    ids=["model", "epochs", "limit_batches", "long-model"],
 )
 def test_verify_names_a_manifest_entry_that_says_other_than_its_config(shipped, key, value, problem):
     """A manifest edited by hand ("model": another kind, epochs or limit_batches changed to hide a quick
