@@ -138,7 +138,9 @@ def load_manifest(directory: Path) -> dict | None:
         return None
     try:
         manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
+    # ValueError: UnicodeDecodeError, JSONDecodeError and an integer past Python's 4300 digits, which json
+    # raises as a plain ValueError; RecursionError: nesting past the stack (json's parser recurses)
+    except (OSError, ValueError, RecursionError):
         return None
     if not isinstance(manifest, dict) or manifest.get("format") != "crowdmpc-prepared":
         return None

@@ -158,6 +158,21 @@ def test_incomplete_prepared_directory_is_not_used(prepared):
         protocol_files(prepared, "paper")
 
 
+@pytest.mark.parametrize(
+    "text",
+    ['{"format": "crowdmpc-prepared", "n": ' + "9" * 5000 + "}", "[" * 100_000],
+    ids=["long-integer", "nested"],
+)
+def test_a_prepared_manifest_of_hostile_json_is_unreadable_not_a_traceback(prepared, text):
+    """`crowdmpc evaluate --data-dir DIR` over a manifest.json holding a 5000-digit integer ended in
+    "ValueError: Exceeds the limit (4300 digits)": load_manifest caught JSONDecodeError, not the ValueError
+    json raises for such a number. It is now unreadable, as other damage is."""
+    (prepared / "manifest.json").write_text(text)
+    assert locate.load_manifest(prepared) is None
+    with pytest.raises(PredictorError, match="incomplete or unreadable; re-run"):
+        protocol_files(prepared, "paper")
+
+
 def _fast_prepare(monkeypatch, then=None):
     """prepare_ewap without categorisation or self-check, counted; ``then(out)`` runs after each."""
     calls = []
