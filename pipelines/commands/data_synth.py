@@ -126,7 +126,9 @@ def _provenance(path: Path) -> dict | None:
 
     try:
         document = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
+    # ValueError: UnicodeDecodeError, JSONDecodeError and an integer past Python's 4300 digits, which json
+    # raises as a plain ValueError; RecursionError: nesting past the stack (json's parser recurses)
+    except (OSError, ValueError, RecursionError):
         return None
     return document if isinstance(document, dict) else None
 

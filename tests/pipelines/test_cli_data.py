@@ -445,6 +445,20 @@ def test_synth_help_says_how_its_robots_move(capsys):
     assert "straight" not in text
 
 
+@pytest.mark.parametrize(
+    "text", ['{"data": ' + "9" * 5000 + "}", "[" * 100_000], ids=["long-integer", "nested"]
+)
+def test_a_provenance_file_of_hostile_json_is_refused_as_one_that_exists(monkeypatch, tmp_path, capsys, text):
+    """`data synth --out x.ndjson` beside an x.synth.json holding a 5000-digit integer ended in "ValueError:
+    Exceeds the limit (4300 digits)": _provenance caught JSONDecodeError, not the ValueError json raises for
+    such a number. It is now no provenance of this command, refused as any other file there."""
+    monkeypatch.setitem(sys.modules, "pipelines.experiments.synth", types.SimpleNamespace(synthesize=None))
+    (tmp_path / "x.synth.json").write_text(text)
+    argv = ["data", "synth", "--out", str(tmp_path / "x.ndjson"), "--episodes", "1", "--humans", "2"]
+    code, _, err = run(capsys, *argv, "--seed", "0")
+    assert_one_line_error(code, err, f"--out {tmp_path / 'x.synth.json'} exists; add --replace")
+
+
 def test_an_interrupted_synth_never_leaves_data_beside_another_provenance(monkeypatch, tmp_path, capsys):
     """`data synth` stopped between renaming the data into place and writing its provenance left data
     without provenance (the rerun said "exists; add --replace"), or with --replace, the new data beside the
