@@ -57,7 +57,9 @@ def _check_not_stopped_early(out: Path, metrics: Path) -> None:
     the stop, either way other weights than the run's under its settings."""
     try:
         training = json.loads(metrics.read_text(encoding="utf-8")).get("training", {})
-    except (OSError, ValueError, AttributeError):  # the run's other checks say what is wrong with it
+    # the run's other checks say what is wrong with it; RecursionError: nesting past the stack (json's parser
+    # recurses), damage as the others are
+    except (OSError, ValueError, AttributeError, RecursionError):
         return
     stopped = training.get("stopped_early_after") if isinstance(training, dict) else None
     if stopped is not None:

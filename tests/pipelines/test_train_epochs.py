@@ -76,3 +76,14 @@ def test_a_run_that_recorded_no_count_needs_epochs_typed(tmp_path, capsys):
     assert err.count("\n") == 1
     assert _train(tmp_path, "--resume", "--epochs", "2") == 0
     assert _epochs_done(tmp_path) == 2 and _settings(tmp_path)["epochs"] == 2
+
+
+def test_a_finished_runs_metrics_nested_past_the_stack_is_no_traceback(tmp_path, capsys):
+    """`train --resume --epochs 2` of a run whose NAME.metrics.json was nested 100,000 deep ended in
+    "RecursionError: maximum recursion depth exceeded while decoding a JSON array": the check of a stop by
+    --patience caught the ValueError of other damage only. It now reads such a file as it reads those."""
+    assert _train(tmp_path, "--epochs", "1") == 0
+    (tmp_path / "run" / "vanilla_lstm_custom.metrics.json").write_text("[" * 100_000)
+    capsys.readouterr()
+    assert _train(tmp_path, "--resume", "--epochs", "2") == 0
+    assert _epochs_done(tmp_path) == 2
