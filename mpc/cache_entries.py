@@ -218,7 +218,7 @@ def _readentry_record(manifest: Path) -> object:
     """The record stored beside ``manifest`` (<key>.record), or None when there is none or it is no JSON."""
     try:
         return json.loads(manifest.with_suffix(".record").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):  # RecursionError: nested past json's (recursive) parser
         return None
 
 

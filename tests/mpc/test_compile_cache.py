@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from mpc import cache_admin, compile_cache, solvers
-from mpc.cache_entries import LEFTOVER_AGE_S, locked, remove_dead_leftovers
+from mpc.cache_entries import LEFTOVER_AGE_S, discard, intact, load_solver, locked, remove_dead_leftovers
 from mpc.cmpc import CMPC
 from mpc.config import MPCConfig
 from mpc.fallback import PlanMemory
@@ -743,6 +743,25 @@ def test_a_library_no_entry_names_is_removed_as_a_killed_compiles(tmp_path):
     assert remove_dead_leftovers(tmp_path) == len(leftovers)
     assert not {p.name for p in tmp_path.iterdir()} & set(leftovers)
     assert all((tmp_path / name).exists() for name in kept)
+
+
+def test_a_record_nested_past_the_stack_is_no_record(tmp_path):
+    """A cache entry's .record edited to nest 100,000 deep ended the run that met it (a load, a discard, the
+    cleanup of a killed compile's library) in "RecursionError: maximum recursion depth exceeded while decoding
+    a JSON array": the record's reader caught ValueError alone. Now it is no record, as one that is no JSON:
+    the entry does not load and its manifest still names its library."""
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True)
+    key = "ab" * 32
+    library = tmp_path / f"{key}.{int(dead.stdout)}_0123abcd.so"
+    library.write_text("x")
+    os.utime(library, (time.time() - 2 * LEFTOVER_AGE_S,) * 2)
+    manifest = tmp_path / f"{key}.casadi"
+    manifest.write_text("x")
+    manifest.with_suffix(".record").write_text("[" * 100_000)
+    assert remove_dead_leftovers(tmp_path) == 0 and library.exists()  # an entry from before records: kept
+    assert not intact(manifest) and load_solver(manifest) is None
+    discard(manifest)
+    assert not manifest.exists() and not manifest.with_suffix(".record").exists()
 
 
 def _fma_flags() -> list[str] | None:
