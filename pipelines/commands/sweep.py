@@ -145,6 +145,7 @@ def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
     from pipelines.config import command_config
     from pipelines.config.recorded import report_config
     from pipelines.experiments.log import SWEEP_FILE
+    from pipelines.experiments.ray_join import check_output_outside_job_copy
     from pipelines.experiments.sweep_folder import check_sweep_directory
 
     # a report of the sweep in --out: its recorded config beneath what is typed
@@ -163,6 +164,7 @@ def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
                 raise PipelineError(f"{settings.out} holds no sweep ({SWEEP_FILE}): nothing to report")
             args.parser_error(f"the following arguments are required: --{key} (or [sweep] {key})")
     out = without_missing_parents(Path(settings.out or ""))
+    check_output_outside_job_copy(out, cfg.label("sweep", "out"))  # a `ray job submit` entrypoint's
     if not args.dry_run:
         check_writable(out, cfg.label("sweep", "out"), directory=True)
     check_sweep_directory(out, cfg.label("sweep", "out"))  # reads only: a dry run planned into others' files

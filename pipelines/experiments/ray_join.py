@@ -3,9 +3,10 @@ wrong there is the user's set-up, not a bug, so each failure is one line naming 
 listening at it, another program's port, a dashboard's URL, a cluster that wants an authentication token,
 Ray's own refusals), a join that takes long says so, and on a cluster with fewer free CPUs than workers the
 sweep runs as many workers as fit. Ray's C++ warnings that repeat while it retries a refusal show once
-(pipelines.experiments.ray_stderr), and the variables a `ray job submit` job's runtime_env sets are left to it
-(``left_to_the_job``). It also finds and tries the port whose answer says the cluster is still there
-(``gcs_endpoint``, ``answers``). pipelines.experiments.backends' RayBackend calls it."""
+(pipelines.experiments.ray_stderr), the variables a `ray job submit` job's runtime_env sets are left to it
+(``left_to_the_job``), and a relative --out there, a folder in Ray's copy of the working directory, is
+refused (``check_output_outside_job_copy``). It also finds and tries the port whose answer says the cluster
+is still there (``gcs_endpoint``, ``answers``). pipelines.experiments.backends' RayBackend calls it."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import json
 import os
 import sys
 import threading
+from pathlib import Path
 from typing import Any, Final
 
 from pipelines.errors import PipelineError
@@ -128,10 +130,10 @@ def left_to_the_job(env_vars: dict[str, str]) -> dict[str, str]:
     even alike (Ray 2.60: "Failed to merge the Job's runtime env ... because of a conflict"), so a job given
     CROWDMPC_DATA in its --runtime-env-json never joined. The job's own variables reach every actor. One the
     job sets to another value than the sweep's workers need is refused in one line, naming it."""
+    job = _job_runtime_env()
     try:
-        job = json.loads(os.environ.get(RAY_JOB_CONFIG_ENV) or "{}").get("runtime_env") or {}
-        job_vars = {str(k): str(v) for k, v in (job.get("env_vars") or {}).items()}
-    except (ValueError, AttributeError):  # not a job config this code knows: Ray's to read, as it does
+        job_vars = {str(k): str(v) for k, v in (job.get("env_vars") or {}).items()} if job else {}
+    except AttributeError:  # not a job config this code knows: Ray's to read, as it does
         return env_vars
     differ = [
         f"{k}={job_vars[k]!r} (the sweep's: {v!r})" for k, v in env_vars.items() if job_vars.get(k, v) != v
@@ -143,6 +145,44 @@ def left_to_the_job(env_vars: dict[str, str]) -> dict[str, str]:
             "variables reach the workers without it)"
         )
     return {k: v for k, v in env_vars.items() if k not in job_vars}
+
+
+def job_working_copy() -> Path | None:
+    """The folder this process runs in where it is a `ray job submit --working-dir` entrypoint there: Ray
+    2.60 unpacks the uploaded folder into its cache on the head, runs the entrypoint in it and puts it first
+    on PYTHONPATH. None for no job, a job without a working_dir (it runs where `ray start` was run), or an
+    entrypoint that went elsewhere (`bash -c "cd /x && ..."`)."""
+    job = _job_runtime_env()
+    if not job or not job.get("working_dir"):
+        return None
+    here = os.path.realpath(os.getcwd())
+    entries = os.environ.get("PYTHONPATH", "").split(os.pathsep)
+    return Path(here) if any(e and os.path.realpath(e) == here for e in entries) else None
+
+
+def check_output_outside_job_copy(out: Path, label: str) -> None:
+    """PipelineError for a relative ``out`` in a `ray job submit --working-dir` entrypoint: it named a folder
+    in Ray's copy of the working directory, which the submitting machine never sees and Ray deletes once
+    unused (its working_dir cache), while the sweep said "wrote rel/table.md" as if it were beside the
+    user's files (met with Ray 2.60: `ray job submit --working-dir . -- crowdmpc sweep ... --out rel`)."""
+    copy = job_working_copy()
+    if copy is None or out.is_absolute():
+        return
+    raise PipelineError(
+        f"{label} {str(out)!r} is a relative path, and this sweep runs as a `ray job submit --working-dir` "
+        f"entrypoint in Ray's copy of that folder on the head ({copy}), which Ray deletes once unused: "
+        "give an absolute path on the head"
+    )
+
+
+def _job_runtime_env() -> dict[str, Any] | None:
+    """The runtime_env of the `ray job submit` job this process is the entrypoint of ({} for none); None
+    where its job config is no JSON object this code knows (Ray's to read, as it does)."""
+    try:
+        job = json.loads(os.environ.get(RAY_JOB_CONFIG_ENV) or "{}").get("runtime_env") or {}
+    except (ValueError, AttributeError):
+        return None
+    return job if isinstance(job, dict) else None
 
 
 def _give_address(given: str) -> str:

@@ -1,0 +1,59 @@
+"""A sweep as a `ray job submit` entrypoint, without Ray installed: the job's environment is set as Ray 2.60's
+job supervisor set it (met by `ray job submit --working-dir . -- python -c ...` on a `ray start --head`):
+RAY_JOB_CONFIG_JSON_ENV_VAR holds the job's runtime_env, and with a working_dir the entrypoint runs in
+Ray's unpacked copy of it, first on PYTHONPATH."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from pipelines.cli import main
+
+SWEEP = ["sweep", "--experiment", "baselines", "--humans", "2", "--episodes-per-cell", "1", "--workers", "1"]
+
+
+def _job(monkeypatch, copy, working_dir: bool = True, on_pythonpath: bool = True) -> None:
+    runtime_env = (
+        {"working_dir": "gcs://_ray_pkg_34e2b460ba75db30.zip", "env_vars": {}} if working_dir else {}
+    )
+    job = {"runtime_env": runtime_env, "metadata": {"job_submission_id": "raysubmit_x"}}
+    monkeypatch.setenv("RAY_JOB_CONFIG_JSON_ENV_VAR", json.dumps(job))
+    monkeypatch.setenv("PYTHONPATH", str(copy) if on_pythonpath else "")
+    monkeypatch.chdir(copy)
+
+
+def test_a_relative_out_in_a_working_dir_job_is_refused_in_one_line(tmp_path, monkeypatch, capsys):
+    """`ray job submit --working-dir . -- crowdmpc sweep ... --out rel1` ran, said "wrote rel1/table.md",
+    and left the sweep in session_*/runtime_resources/working_dir_files/_ray_pkg_*/rel1 on the head."""
+    copy = tmp_path / "_ray_pkg_34e2b460ba75db30"
+    copy.mkdir()
+    _job(monkeypatch, copy)
+    assert main([*SWEEP, "--out", "rel1", "--backend", "inline"]) == 2
+    said = capsys.readouterr().err.strip()
+    assert "\n" not in said and "--out 'rel1' is a relative path" in said
+    assert f"Ray's copy of that folder on the head ({copy})" in said and "give an absolute path" in said
+    assert not (copy / "rel1").exists()
+
+
+@pytest.mark.parametrize("where", ["absolute", "job without working_dir", "entrypoint elsewhere", "no job"])
+def test_other_outs_of_a_job_are_left_alone(tmp_path, monkeypatch, where):
+    """An absolute --out; a job without --working-dir (its entrypoint runs where `ray start` was run, a
+    folder that stays); an entrypoint that changed folder; no job at all: the --dry-run plans as ever."""
+    from pipelines.experiments.ray_join import check_output_outside_job_copy, job_working_copy
+
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    _job(
+        monkeypatch,
+        copy,
+        working_dir=where != "job without working_dir",
+        on_pythonpath=where != "entrypoint elsewhere",
+    )
+    if where == "no job":
+        monkeypatch.delenv("RAY_JOB_CONFIG_JSON_ENV_VAR")
+    out = str(tmp_path / "runs" / "s1") if where == "absolute" else "s1"
+    assert main([*SWEEP, "--out", out, "--dry-run", "--no-progress"]) == 0
+    assert job_working_copy() == (copy if where == "absolute" else None)
+    check_output_outside_job_copy(tmp_path / "s1", "--out")  # absolute: never refused
