@@ -57,3 +57,20 @@ def test_other_outs_of_a_job_are_left_alone(tmp_path, monkeypatch, where):
     assert main([*SWEEP, "--out", out, "--dry-run", "--no-progress"]) == 0
     assert job_working_copy() == (copy if where == "absolute" else None)
     check_output_outside_job_copy(tmp_path / "s1", "--out")  # absolute: never refused
+
+
+def test_the_cluster_extra_brings_the_jobs_api_and_ray_client():
+    """The [cluster] extra was plain ray: a head installed from it refused `ray job submit` ("Failed to
+    connect to Ray at address: http://127.0.0.1:8266"; its dashboard serves the Jobs API), its own `ray job
+    submit` wanted ray[default], and `sweep --ray-address ray://HOST:10001`, which `sweep --help` offers,
+    met "Ray Client requires pip package `ray[client]`" (Ray 2.60). ray[default] brings both (grpcio)."""
+    import tomllib
+    from pathlib import Path
+
+    from packaging.requirements import Requirement
+
+    pyproject = Path(__file__).parents[2] / "pyproject.toml"
+    extras = tomllib.loads(pyproject.read_text(encoding="utf-8"))["project"]["optional-dependencies"]
+    extra = extras["cluster"]
+    rays = [Requirement(text) for text in extra if Requirement(text).name == "ray"]
+    assert len(rays) == 1 and "default" in rays[0].extras
