@@ -45,7 +45,10 @@ def _code_text(run: Any) -> str:
     code = run.get("code") if isinstance(run, dict) else None
     if not isinstance(code, dict):
         return "not recorded (a run from before the code was)"
-    parts = [f"commit {str(code.get('commit'))[:12]}{dirty_text(code.get('dirty'), code.get('diff_sha256'))}"]
+    commit = code.get("commit")
+    # none from an installed wheel or a folder without .git (a `ray job submit` copy): said, not "commit None"
+    dirty = dirty_text(code.get("dirty"), code.get("diff_sha256"))
+    parts = [f"commit {str(commit)[:12]}{dirty}" if commit else "no git commit"]
     parts += [f"{label} {code[key]}" for key, label in _LIBRARIES if code.get(key)]
     plugins = code.get("plugins")
     if isinstance(plugins, dict):

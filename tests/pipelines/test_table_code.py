@@ -51,3 +51,17 @@ def test_the_table_names_only_the_code_of_the_runs_it_tabulates(tmp_path, capsys
     for damaged in (0, -1):  # a record naming no line of the file: run 0 was passed over, -1 counted
         note = code_note(out, {1, damaged})
         assert note.startswith("Code: 2 versions") and "unknown (a run sweep.json no longer listed)" in note
+
+
+def test_a_run_without_a_commit_is_said_to_have_none(tmp_path, capsys):
+    """A sweep by an installed wheel, or by `ray job submit --working-dir` (Ray's upload leaves .git out),
+    records no commit: table.md said "Code: commit None, crowdmpc 0.1.0, ..." (met with Ray 2.60)."""
+    from pipelines.commands.sweep_table_notes import code_note
+
+    out = tmp_path / "s"
+    assert main([*ARGV, "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    meta = json.loads((out / "sweep.json").read_text())
+    meta["runs"][0]["code"] = {**code_identity(), "commit": None, "dirty": None, "diff_sha256": None}
+    (out / "sweep.json").write_text(json.dumps(meta))
+    assert code_note(out).startswith("Code: no git commit, crowdmpc ")
+    assert "None" not in code_note(out)
