@@ -162,16 +162,16 @@ def job_working_copy() -> Path | None:
 
 def check_output_outside_job_copy(out: Path, label: str) -> None:
     """PipelineError for a relative ``out`` in a `ray job submit --working-dir` entrypoint: it named a folder
-    in Ray's copy of the working directory, which the submitting machine never sees and Ray deletes once
-    unused (its working_dir cache), while the sweep said "wrote rel/table.md" as if it were beside the
+    in Ray's copy of the working directory, which the submitting machine never sees and Ray's working_dir
+    cache may delete once the job ends, while the sweep said "wrote rel/table.md" as if it were beside the
     user's files (met with Ray 2.60: `ray job submit --working-dir . -- crowdmpc sweep ... --out rel`)."""
     copy = job_working_copy()
     if copy is None or out.is_absolute():
         return
     raise PipelineError(
         f"{label} {str(out)!r} is a relative path, and this sweep runs as a `ray job submit --working-dir` "
-        f"entrypoint in Ray's copy of that folder on the head ({copy}), which Ray deletes once unused: "
-        "give an absolute path on the head"
+        f"entrypoint in Ray's copy of that folder on the head ({copy}), which Ray's cache may delete once "
+        "the job ends: give an absolute path on the head"
     )
 
 
