@@ -4,6 +4,11 @@ trained one (``*``: a quick check) or one that never loads (``!``)."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Final
+
+# The widest a cell of a manifest's own text is shown (a plugin's "module:NetClass" kind fits): a hand-edited
+# kind, class or protocol of 100,000 characters made every line of the table as wide.
+CELL_LIMIT: Final[int] = 60
 
 
 def run_list(directory: Path | None) -> int:
@@ -53,6 +58,18 @@ def _pooling(located) -> str:
     return pooling if isinstance(pooling, str) and len(pooling) <= 16 else "?"
 
 
+def _cell(value: object) -> str:
+    """A manifest's value as a table cell, cut to ``CELL_LIMIT`` characters as messages cut a file's values
+    (``short_repr``); one holding a line break or another unprintable character is shown escaped, so that it
+    cannot break its row in two."""
+    from predictors.errors import short_repr
+
+    text = str(value)
+    if not text.isprintable():
+        return short_repr(text, CELL_LIMIT)
+    return text if len(text) <= CELL_LIMIT else f"{text[: CELL_LIMIT - 3]}..."
+
+
 def _loaded_class(entry) -> str:
     """The class the entry loads as, told by its model kind: the shipped manifest's "class" was written
     before model kinds (``SocialLSTMPredictor`` for the LSTMs, which load as ``LearnedPredictor``), so one
@@ -94,16 +111,16 @@ def format_list(located_entries, never_loads: list[bool] | None = None) -> str:
         rows.append(
             [
                 entry.name + marks,
-                _loaded_class(entry),
-                entry.model,
+                _cell(_loaded_class(entry)),
+                _cell(entry.model),
                 _pooling(located),
-                entry.protocol,
+                _cell(entry.protocol),
                 _metric(m, "val", "ade"),
                 _metric(m, "val", "fde"),
                 _metric(m, "test", "ade"),
                 _metric(m, "test", "fde"),
                 topk,
-                entry.training.get("size_kb", "-"),
+                _cell(entry.training.get("size_kb", "-")),
                 located.source,
             ]
         )

@@ -595,6 +595,31 @@ def test_zoo_list_shows_junk_metrics_as_question_marks(zoo_dir, capsys):
     assert row[0] == NAME and row[5:9] == ["-", "-", "?", "-"] and row[9] == "?/-"
 
 
+def test_zoo_list_cuts_a_manifests_long_or_unprintable_text_and_show_keeps_it(zoo_dir, capsys):
+    """A hand-edited kind of 100,000 characters made every line of `zoo list` 100,000 characters wide (as
+    `zoo verify`'s line was): each cell of the manifest's own text is cut as messages cut a file's values,
+    and one holding a line break is shown escaped, not split over two rows. `zoo show` prints the entry as
+    JSON, the data as stored, which scripts read: whole."""
+    long = "x" * 100_000
+    edited = {**real_entry(), "model": long, "class": "C" * 200, "protocol": "one\ntwo"}
+    write_manifest(zoo_dir, {**edited, "training": {**edited["training"], "size_kb": [1] * 1000}})
+    assert main(["zoo", "list"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert max(map(len, out)) < 400 and len(out) == 4  # header, rule, the row, the metrics note
+    row = out[2].split("  ")
+    cells = [cell.strip() for cell in row if cell.strip()]
+    assert cells[:3] == [NAME, "C" * 57 + "...", "x" * 57 + "..."]  # an unknown kind: its "class"
+    assert "'one\\ntwo'" in cells and str([1] * 1000)[:57] + "..." in cells
+
+    write_manifest(zoo_dir, {**real_entry(), "model": "m" * 60})  # as long as a cell shows: whole
+    assert main(["zoo", "list"]) == 0
+    assert "m" * 60 + "  " in capsys.readouterr().out
+
+    write_manifest(zoo_dir, edited)
+    assert main(["zoo", "show", NAME]) == 0
+    assert json.loads(capsys.readouterr().out) == {**edited, "zoo": "user"}
+
+
 @pytest.mark.parametrize("summary", [{"training": "x"}, {"metrics": [1]}, {"name": 5}, {"protocol": 3}])
 def test_zoo_add_refuses_a_bad_metrics_file_before_writing(tmp_path, zoo_dir, pair, capsys, summary):
     (pair[0].with_suffix(".metrics.json")).write_text(json.dumps(summary))
