@@ -103,6 +103,31 @@ def dirty_text(dirty: Any, diff_sha256: Any) -> str:
     return "+dirty" + (f":{diff_sha256[:8]}" if isinstance(diff_sha256, str) and diff_sha256 else "")
 
 
+# The versions a run's recorded code names besides its commit, and their labels: what table.md's "Code:" line
+# and compare's code name of it, in this order.
+CODE_VERSIONS: Final[tuple[tuple[str, str], ...]] = (
+    ("version", "crowdmpc"),
+    ("python", "Python"),
+    ("casadi", "CasADi"),
+    ("torch", "torch"),
+    ("numpy", "numpy"),
+)
+
+
+def versions_text(code: dict[str, Any]) -> list[str]:
+    """The versions ``code`` (a recorded ``code_identity``) names: "crowdmpc 0.1.0", "Python 3.11.7", ..."""
+    return [f"{label} {code[key]}" for key, label in CODE_VERSIONS if code.get(key)]
+
+
+def no_commit_text(code: dict[str, Any]) -> str | None:
+    """Recorded code that names no git commit (an installed wheel, a `ray job submit` copy, whose upload
+    leaves .git out), as table.md and compare say it: "no git commit, crowdmpc 0.1.0, Python 3.11.7, ...",
+    its versions being all that tells such code apart; None where it names no version either (nothing of
+    the code was recorded)."""
+    versions = versions_text(code)
+    return ", ".join(["no git commit", *versions]) if versions else None
+
+
 def _diff_sha256(root: Path) -> str | None:
     """The sha256 of ``git diff HEAD`` in ``root`` (tracked files; untracked ones are no part of the code a
     clone has), None where git cannot say."""

@@ -37,11 +37,13 @@ faced the same crowd: the same scenario, seed, humans and robots, the crowd made
 same recording, the same placement rules and formation), and the same method (case ignored; with --by-cell,
 sweeps' episodes the same cell, whatever their columns' labels: `--vary mpc.d_min=0.8,1.0`'s 0.8 column is
 Table II's cell). Only episodes every run holds are compared. First each run's folder, episodes and code (the
-commits it names, each with its plugins' files); then, for each method and crowd size, every run's success,
-collision, contact and discomfort rates (%) and mean travel time over its successes (s), and for each run
-after the first, against it: +k / −j, the episodes where the run has the outcome and the first run not, and
-the reverse, with the exact McNemar p; the mean travel-time difference over the episodes both completed,
-± Student's t 95 % half-width, their number in brackets; and how many episodes have every metric equal.
+commits it names, each with its plugins' files; code of no git commit, an installed wheel's, by its versions
+as table.md names it: "no git commit, crowdmpc 0.1.0, Python ..."); then, for each method and crowd size,
+every run's success, collision, contact and discomfort rates (%) and mean travel time over its successes (s),
+and for each run after the first, against it: +k / −j, the episodes where the run has the outcome and the
+first run not, and the reverse, with the exact McNemar p; the mean travel-time difference over the episodes
+both completed, ± Student's t 95 % half-width, their number in brackets; and how many episodes have every
+metric equal.
 Last, the settings the compared groups' episodes ran with where they differ from the first run's. --plot
 draws each change with its 95 % interval (the rates' by Newcombe's square-and-add for paired proportions;
 --json holds them too).

@@ -38,7 +38,7 @@ def _code_text(run: Any) -> str:
     """A run line's recorded code (``pipelines.version.code_identity``, with its plugins) in one line; that
     of a run sweep.json no longer listed (``run_lines.lost_runs``) is unknown."""
     from pipelines.experiments.run_lines import is_lost, is_reused
-    from pipelines.version import dirty_text
+    from pipelines.version import dirty_text, no_commit_text, versions_text
 
     if is_lost(run):  # a line --reuse took says which sweep's file lacks it
         return f"unknown ({run['lost']})" if is_reused(run) else "unknown (a run sweep.json no longer listed)"
@@ -48,21 +48,15 @@ def _code_text(run: Any) -> str:
     commit = code.get("commit")
     # none from an installed wheel or a folder without .git (a `ray job submit` copy): said, not "commit None"
     dirty = dirty_text(code.get("dirty"), code.get("diff_sha256"))
-    parts = [f"commit {str(commit)[:12]}{dirty}" if commit else "no git commit"]
-    parts += [f"{label} {code[key]}" for key, label in _LIBRARIES if code.get(key)]
+    if commit:
+        parts = [f"commit {str(commit)[:12]}{dirty}", *versions_text(code)]
+    else:  # as compare names it
+        parts = [no_commit_text(code) or "no git commit"]
     plugins = code.get("plugins")
     if isinstance(plugins, dict):
         parts += [f"plugin {spec} {str(sha)[:12]}" for spec, sha in sorted(plugins.items())]
     return ", ".join(parts)
 
-
-_LIBRARIES = (
-    ("version", "crowdmpc"),
-    ("python", "Python"),
-    ("casadi", "CasADi"),
-    ("torch", "torch"),
-    ("numpy", "numpy"),
-)
 
 NOT_COUNTED_NAMED = 8  # cells named in table.md's note of episodes not recorded; the rest counted
 

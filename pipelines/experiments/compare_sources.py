@@ -19,7 +19,7 @@ from typing import Any, Final
 from pipelines.errors import PipelineError
 from pipelines.experiments.log import SWEEP_FILE, episode_log, read_sweep_file
 from pipelines.experiments.run_lines import run_number, runs_named
-from pipelines.version import dirty_text
+from pipelines.version import CODE_VERSIONS, dirty_text, no_commit_text
 from predictors.progress import progress_bar
 
 METRICS_TOPIC: Final = "/episode/metrics"
@@ -192,6 +192,8 @@ def _read_episode(
             "dirty": meta.get("dirty") == "true",
             "diff_sha256": null_none(meta.get("diff_sha256")),
             "plugins": meta.get("plugins"),
+            # what names code without a git commit (an installed wheel's recordings)
+            **{key: null_none(meta.get(key)) for key, _ in CODE_VERSIONS},
         }
     )
     return {**messages[-1], "config": rec.config()}, _crowd_field(rec.run_meta()), commit
@@ -216,11 +218,20 @@ def _warn(label: str, text: str) -> None:
 def commit_text(code: Any) -> str | None:
     """A run's recorded code as "abc123def456+dirty" ("+dirty:0123abcd": its uncommitted changes' sha256,
     where recorded), then its plugins' files, "(plugin module:Class 0123456789ab)": runs of one commit and
-    two versions of a user's net showed one code. None where it names no commit."""
-    commit = code.get("commit") if isinstance(code, dict) else None
-    if not commit or commit == "null":
+    two versions of a user's net showed one code. Code without a git commit (an installed wheel, a `ray job
+    submit` copy) is named by its versions, as table.md names it ("no git commit, crowdmpc 0.1.0, Python
+    3.11.7, ..."): it read "code not recorded", as a run from before code was. None where nothing of the code
+    was recorded."""
+    if not isinstance(code, dict):
         return None
-    text = str(commit)[:12] + dirty_text(code.get("dirty"), code.get("diff_sha256"))
+    commit = code.get("commit")
+    if commit and commit != "null":
+        text = str(commit)[:12] + dirty_text(code.get("dirty"), code.get("diff_sha256"))
+    else:
+        unnamed = no_commit_text(code)
+        if unnamed is None:
+            return None
+        text = unnamed
     plugins = code.get("plugins")
     if isinstance(plugins, str):  # a recording's metadata holds it as JSON text
         try:

@@ -138,3 +138,41 @@ def test_recorded_plugins_nested_past_the_stack_name_no_plugins(tmp_path, capsys
     other = _sweep(tmp_path / "b", [_record(i, *o) for i, o in enumerate(BASE)])
     assert main(["compare", f"a={path}", f"b={other}"]) == 0
     assert f"a: {path}, 4 episodes, code 0123456789ab\n" in capsys.readouterr().out
+
+
+def test_code_without_a_git_commit_is_named_by_its_versions_as_the_table_names_it(
+    tmp_path, monkeypatch, capsys
+):
+    """A run of an installed wheel or a `ray job submit` copy (Ray's upload leaves .git out) records its
+    version, Python and libraries but no commit: compare said "code not recorded", as of a run from before
+    code was kept, where table.md says "no git commit, crowdmpc 0.1.0, ...". Now both say the latter, of a
+    sweep, a simulate --json file and recordings alike; a run with no code record still reads "not
+    recorded"."""
+    from pipelines.commands.sweep_table_notes import code_note
+    from pipelines.logs import recording
+
+    versions = {"version": "0.1.0", "python": "3.11.7", "casadi": "3.8.2", "torch": "2.13.0+cpu"}
+    code = {**versions, "numpy": "2.4.6", "commit": None, "dirty": None, "diff_sha256": None}
+    said = "no git commit, crowdmpc 0.1.0, Python 3.11.7, CasADi 3.8.2, torch 2.13.0+cpu, numpy 2.4.6"
+    sweep = _sweep(tmp_path / "sweep", [_record(i, *o) for i, o in enumerate(BASE)])
+    (sweep / "sweep.json").write_text(json.dumps({"experiment": "table2", "runs": [{"code": code}]}))
+    sim = _simulate_json(tmp_path / "run.json", [_record(i, *o) for i, o in enumerate(BASE)])
+    sim.write_text(json.dumps({**json.loads(sim.read_text()), "code": code}))
+    records = [_record(i, *o) for i, o in enumerate(BASE)]
+    none = _sweep(tmp_path / "none", records, commit=None)  # no sweep.json: nothing of its code
+    assert main(["compare", f"a={sweep}", f"b={sim}", f"c={none}", "--json", str(tmp_path / "c.json")]) == 0
+    out = capsys.readouterr().out
+    assert f"a: {sweep}, 4 episodes, code {said}\n" in out and f"b: {sim}, 4 episodes, code {said}\n" in out
+    assert f"c: {none}, 4 episodes, code not recorded\n" in out
+    runs = json.loads((tmp_path / "c.json").read_text())["runs"]
+    assert [run["code"] for run in runs] == [[said], [said], []]
+    assert code_note(sweep) == f"Code: {said}."  # the same words
+    assert commit_text({"commit": None}) is None and commit_text(None) is None  # nothing of the code
+
+    monkeypatch.setattr(recording, "code_with_plugins", lambda: code)  # a wheel's recording
+    run = ["simulate", "--controller", "cmpc", "--predictor", "constant_velocity", "--humans", "2"]
+    run += ["--episodes", "1", "--seed", "4", "--no-progress", "--record", str(tmp_path / "r")]
+    assert main(run) == 0
+    capsys.readouterr()
+    assert main(["compare", f"r={tmp_path / 'r'}", f"r2={tmp_path / 'r'}", "--no-progress"]) == 0
+    assert f"r: {tmp_path / 'r'}, 1 episode, code {said}\n" in capsys.readouterr().out
