@@ -26,7 +26,13 @@ from predictors.export.linalg import linear
 from predictors.export.movement import squeeze, unsqueeze
 from predictors.export.ops import register
 from predictors.export.symbolic import SymTensor, Unexportable, lift
-from predictors.export.transformer import transformer_encoder, transformer_encoder_layer
+from predictors.export.transformer import (
+    transformer,
+    transformer_decoder,
+    transformer_decoder_layer,
+    transformer_encoder,
+    transformer_encoder_layer,
+)
 
 register()  # the dispatch tables SymTensor consults, filled before anything is exported
 
@@ -114,6 +120,9 @@ REPLACED: dict[type[nn.Module], Callable[..., Any]] = {
     nn.MultiheadAttention: multihead_attention,
     nn.TransformerEncoderLayer: transformer_encoder_layer,
     nn.TransformerEncoder: transformer_encoder,
+    nn.TransformerDecoderLayer: transformer_decoder_layer,
+    nn.TransformerDecoder: transformer_decoder,
+    nn.Transformer: transformer,
 }
 
 

@@ -173,15 +173,14 @@ CASES = {
 ADDED_FLOAT_MASKS = {"float_masks", "symbolic_float_padding"}
 
 
-@pytest.mark.parametrize("symbol", [ca.MX, ca.SX], ids=["MX", "SX"])
-@pytest.mark.parametrize("name", sorted(CASES))
-def test_transformer_encoder_matches_torch_in_values_and_jacobians(name, symbol):
-    module, fn, inputs = CASES[name]
-    wrapped = Wrap(fn, enc=module).double().eval()
+def assert_matches_torch(wrapped: nn.Module, inputs, symbol, *, fast_path: bool) -> None:
+    """The export's values (1e-10) and Jacobians with respect to every float input (1e-8) against torch's
+    with gradients, and its values against torch's without (its fast path where it may take one) where
+    ``fast_path`` says they agree."""
     function = _export(wrapped, inputs, symbol)
     args = [x.double().numpy().ravel() for x in inputs]
     (got,) = (np.asarray(y).ravel() for y in _outputs(function(*args)))
-    for with_grad in (name in ADDED_FLOAT_MASKS, True):  # torch's fast path, where it agrees, and the other
+    for with_grad in (not fast_path, True):
         (expected,) = _torch_values(wrapped, inputs, with_grad=with_grad)
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-10)
     symbols = [ca.MX.sym(f"a{i}", len(a)) for i, a in enumerate(args)]
@@ -198,6 +197,14 @@ def test_transformer_encoder_matches_torch_in_values_and_jacobians(name, symbol)
         jacobian = ca.Function("j", symbols, [ca.jacobian(out, symbols[i])])
         torch_jacobian = torch.autograd.functional.jacobian(along, x).reshape(-1, x.numel())
         np.testing.assert_allclose(np.asarray(jacobian(*args)), torch_jacobian.numpy(), rtol=0, atol=1e-8)
+
+
+@pytest.mark.parametrize("symbol", [ca.MX, ca.SX], ids=["MX", "SX"])
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_transformer_encoder_matches_torch_in_values_and_jacobians(name, symbol):
+    module, fn, inputs = CASES[name]
+    wrapped = Wrap(fn, enc=module).double().eval()
+    assert_matches_torch(wrapped, inputs, symbol, fast_path=name not in ADDED_FLOAT_MASKS)
 
 
 def _with_gradients(module: nn.Module, x: torch.Tensor, **call) -> np.ndarray:
@@ -276,19 +283,6 @@ def test_what_torch_refuses_is_refused_in_one_line_naming_the_argument(module, c
     with pytest.raises(ExportError, match=message + r".*\(in module 'enc'\)") as info:
         export_function(wrapped, wrapped.forward, [TensorSpec("x", tuple(x.shape))], ["y"], "f")
     assert "\n" not in str(info.value)
-
-
-def test_the_decoder_is_refused_naming_the_torch_layer_the_export_does_not_map():
-    """nn.Transformer (encoder and decoder) is not supported: its nn.TransformerDecoder is named."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        transformer = nn.Transformer(4, 2, 1, 1, 8, batch_first=True)
-    wrapped = Wrap(lambda m, x: m.enc(x, x), enc=transformer).double().eval()
-    refused = (
-        r"inside torch\.nn\.TransformerDecoder, a layer the export does not map \(in module 'enc\.decoder'\)"
-    )
-    with pytest.raises(ExportError, match=refused):
-        export_function(wrapped, wrapped.forward, [TensorSpec("x", (2, 3, 4))], ["y"], "f")
 
 
 # --------------------------------------------------------------------------------- a trajectory transformer
