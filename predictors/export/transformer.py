@@ -42,6 +42,30 @@ def _check_sequence(layer: str, name: str, x: Any, attention: nn.MultiheadAttent
         )
 
 
+def _attend(
+    attention: nn.MultiheadAttention,
+    dropout: nn.Module,
+    x: Any,
+    keys: Any,
+    mask: Any,
+    padding: Any,
+    causal: Any,
+) -> Any:
+    """A layer's attention block (torch's ``_sa_block``, the decoder's ``_mha_block``): ``attention`` of the
+    queries ``x`` over ``keys`` (``x`` itself for self-attention, the memory for the decoder's second), its
+    output through the block's ``dropout``."""
+    out = attention(
+        x, keys, keys, attn_mask=mask, key_padding_mask=padding, is_causal=causal, need_weights=False
+    )[0]
+    return dropout(out)
+
+
+def _feed_forward(module: Any, dropout: nn.Module, x: Any) -> Any:
+    """A layer's feed-forward block (torch's ``_ff_block``: an encoder or decoder layer's ``linear1``,
+    ``activation``, ``dropout``, ``linear2``), its output through ``dropout``."""
+    return dropout(module.linear2(module.dropout(module.activation(module.linear1(x)))))
+
+
 def transformer_encoder_layer(
     module: nn.TransformerEncoderLayer,
     src: Any,
@@ -57,19 +81,10 @@ def transformer_encoder_layer(
     _check_sequence("TransformerEncoderLayer", "src", src, module.self_attn)
 
     def attend(x: Any) -> Any:
-        out = module.self_attn(
-            x,
-            x,
-            x,
-            attn_mask=src_mask,
-            key_padding_mask=src_key_padding_mask,
-            need_weights=False,
-            is_causal=is_causal,
-        )[0]
-        return module.dropout1(out)
+        return _attend(module.self_attn, module.dropout1, x, x, src_mask, src_key_padding_mask, is_causal)
 
     def feed_forward(x: Any) -> Any:
-        return module.dropout2(module.linear2(module.dropout(module.activation(module.linear1(x)))))
+        return _feed_forward(module, module.dropout2, x)
 
     x = src
     if module.norm_first:
@@ -133,31 +148,14 @@ def transformer_decoder_layer(
     _check_memory(name, tgt, memory, module.multihead_attn)
 
     def attend(x: Any) -> Any:
-        out = module.self_attn(
-            x,
-            x,
-            x,
-            attn_mask=tgt_mask,
-            key_padding_mask=tgt_key_padding_mask,
-            is_causal=tgt_is_causal,
-            need_weights=False,
-        )[0]
-        return module.dropout1(out)
+        return _attend(module.self_attn, module.dropout1, x, x, tgt_mask, tgt_key_padding_mask, tgt_is_causal)
 
     def recall(x: Any) -> Any:
-        out = module.multihead_attn(
-            x,
-            memory,
-            memory,
-            attn_mask=memory_mask,
-            key_padding_mask=memory_key_padding_mask,
-            is_causal=memory_is_causal,
-            need_weights=False,
-        )[0]
-        return module.dropout2(out)
+        attention, dropout = module.multihead_attn, module.dropout2
+        return _attend(attention, dropout, x, memory, memory_mask, memory_key_padding_mask, memory_is_causal)
 
     def feed_forward(x: Any) -> Any:
-        return module.dropout3(module.linear2(module.dropout(module.activation(module.linear1(x)))))
+        return _feed_forward(module, module.dropout3, x)
 
     x = tgt
     if module.norm_first:
