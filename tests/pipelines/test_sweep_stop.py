@@ -5,6 +5,7 @@ episodes ended unrecorded, for a rerun to run again (pipelines.experiments.sweep
 from __future__ import annotations
 
 import os
+import signal
 import time
 import types
 from pathlib import Path
@@ -69,6 +70,16 @@ def test_a_stop_waits_a_bounded_time_and_says_how_many_episodes_it_cut(
     assert not log.exists() or not log.read_text()
 
 
+@pytest.fixture
+def ctrl_c():
+    """Python's Ctrl-C handler in this process for the test: a process started in the background (a CI job,
+    `make test &`) inherits SIGINT ignored, as a shell's background job does, and the driver then never saw
+    the interrupt the test sends it (the sweep ran to its end, exit 0)."""
+    saved = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, saved)
+
+
 @pytest.mark.parametrize("backend", ["process", "ray"])
 @pytest.mark.parametrize(("sent", "status"), [("INT", 130), ("TERM", 143)])
 def test_an_interrupted_sweep_records_the_episodes_its_workers_finish(
@@ -79,6 +90,7 @@ def test_an_interrupted_sweep_records_the_episodes_its_workers_finish(
     plugins,  # noqa: F811
     capsys,
     monkeypatch,
+    ctrl_c,
 ):
     """`--workers 2`, Ctrl-C (or `kill`) while both workers ran an episode a second from its end: the driver
     closed the backend at once and both were lost (a Table II sweep's two, each about a second from its end).
@@ -106,7 +118,7 @@ def test_an_interrupted_sweep_records_the_episodes_its_workers_finish(
     assert (tmp_path / "table.md").exists()  # the report of what it recorded
 
 
-def test_a_second_interrupt_ends_the_wait_at_once(tmp_path, plugins, capsys, monkeypatch):  # noqa: F811
+def test_a_second_interrupt_ends_the_wait_at_once(tmp_path, plugins, capsys, monkeypatch, ctrl_c):  # noqa: F811
     """The wait for the workers' episodes is the first interrupt's: a second one stops the sweep at once, as
     the docs promise, whatever is still running."""
     monkeypatch.setattr(sweep_stop, "STOP_WAIT_S", 300.0)
