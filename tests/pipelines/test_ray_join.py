@@ -261,27 +261,9 @@ def test_a_sweeps_cpu_projection_is_for_the_workers_the_cluster_fits(
     import re
 
     from pipelines.cli import main
-    from pipelines.experiments import backends
 
-    fake = _backend_ray(monkeypatch)
-    fake.available_resources = lambda: {"CPU": 2.0}  # type: ignore[attr-defined]
-    monkeypatch.setattr(backends, "ray_available", lambda: True)
-    inline = backends.InlineBackend("none")
-    monkeypatch.setattr(backends.RayBackend, "run", lambda self, tasks: inline.run(tasks))
-    monkeypatch.setattr(backends.RayBackend, "close", lambda self: inline.close())
-    sweep = [
-        "sweep",
-        "--experiment",
-        "baselines",
-        "--humans",
-        "2",
-        "--episodes-per-cell",
-        "1",
-        "--jit",
-        "off",
-    ]
-    ray = ["--backend", "ray", "--ray-address", listening, "--workers", "4"]
-    assert main([*sweep, *ray, "--no-progress", "--out", str(tmp_path / "sw")]) == 0
+    _inline_ray_of_two_cpus(monkeypatch, lambda inline, tasks: inline.run(tasks))
+    assert main(_ray_sweep(listening, tmp_path, episodes=1)) == 0
     err = capsys.readouterr().err
     assert "has 2 CPUs free for --workers 4: the sweep runs 2 workers" in err
     assert re.search(
@@ -296,39 +278,39 @@ def test_a_stopped_sweeps_cpu_projection_is_for_the_workers_the_cluster_fits(
     then `ray stop` once the first records were in): its report projected "for 2 workers on 2 free cores",
     as a stopped sweep's report took the workers asked. The stop carries the workers that ran. Stand-in Ray
     here: one episode inline, then the stop as the backend raises it."""
+    from pipelines.cli import main
     from pipelines.errors import SweepStopped
-    from pipelines.experiments import backends
     from pipelines.experiments.ray_join import stopped_answering
+
+    def run_then_lost(inline, tasks):
+        yield next(inline.run(tasks))
+        raise SweepStopped(stopped_answering(False, "127.0.0.1", 6391, 20.0))
+
+    _inline_ray_of_two_cpus(monkeypatch, run_then_lost)
+    assert main(_ray_sweep(listening, tmp_path, episodes=2)) == 2
+    err = capsys.readouterr().err
+    assert "the 4 planned episodes take" in err and "s for 2 workers on 2 free cores\n" in err
+    assert err.strip().splitlines()[-1].startswith("crowdmpc sweep: error: the Ray cluster stopped answering")
+
+
+def _inline_ray_of_two_cpus(monkeypatch, run) -> None:
+    """The stand-in Ray with a cluster of 2 free CPUs, whose RayBackend runs its episodes inline:
+    ``run(inline, tasks)`` yields them from an InlineBackend."""
+    from pipelines.experiments import backends
 
     fake = _backend_ray(monkeypatch)
     fake.available_resources = lambda: {"CPU": 2.0}  # type: ignore[attr-defined]
     monkeypatch.setattr(backends, "ray_available", lambda: True)
     inline = backends.InlineBackend("none")
-
-    def run_then_lost(self, tasks):
-        yield next(inline.run(tasks))
-        raise SweepStopped(stopped_answering(False, "127.0.0.1", 6391, 20.0))
-
-    monkeypatch.setattr(backends.RayBackend, "run", run_then_lost)
+    monkeypatch.setattr(backends.RayBackend, "run", lambda self, tasks: run(inline, tasks))
     monkeypatch.setattr(backends.RayBackend, "close", lambda self: inline.close())
-    sweep = [
-        "sweep",
-        "--experiment",
-        "baselines",
-        "--humans",
-        "2",
-        "--episodes-per-cell",
-        "2",
-        "--jit",
-        "off",
-    ]
-    ray = ["--backend", "ray", "--ray-address", listening, "--workers", "4"]
-    from pipelines.cli import main
 
-    assert main([*sweep, *ray, "--no-progress", "--out", str(tmp_path / "sw")]) == 2
-    err = capsys.readouterr().err
-    assert "the 4 planned episodes take" in err and "s for 2 workers on 2 free cores\n" in err
-    assert err.strip().splitlines()[-1].startswith("crowdmpc sweep: error: the Ray cluster stopped answering")
+
+def _ray_sweep(listening: str, tmp_path, episodes: int) -> list[str]:
+    """A baselines sweep at 2 humans, ``episodes`` a cell, --workers 4 on the cluster at ``listening``."""
+    sweep = ["sweep", "--experiment", "baselines", "--humans", "2", "--episodes-per-cell", str(episodes)]
+    ray = ["--backend", "ray", "--ray-address", listening, "--workers", "4"]
+    return [*sweep, "--jit", "off", *ray, "--no-progress", "--out", str(tmp_path / "sw")]
 
 
 @pytest.mark.parametrize("port", ["65536", "99999", "1" + "0" * 30])
