@@ -183,6 +183,12 @@ def test_multihead_attention_matches_torch_in_values_and_jacobians(name, symbol)
         assert len(got) == len(expected)
         for g, e in zip(got, expected, strict=True):
             np.testing.assert_allclose(g, e, rtol=0, atol=1e-10)
+    assert_jacobians_match(module, function, inputs, args)
+
+
+def assert_jacobians_match(module: nn.Module, function: ca.Function, inputs, args) -> None:
+    """The Jacobians of ``function`` (``module`` exported) with respect to each float input, at ``args``,
+    against torch's autograd of ``module`` at ``inputs`` (every output stacked), to 1e-8."""
     symbols = [ca.MX.sym(f"a{i}", len(a)) for i, a in enumerate(args)]
     outs = _outputs(function(*symbols))
     for i, x in enumerate(inputs):

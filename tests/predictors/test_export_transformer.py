@@ -28,7 +28,14 @@ from predictors.export import ExportError, TensorSpec, export_function
 from predictors.export.parity import check_parity
 from predictors.learned import LearnedPredictor
 from tests.predictors.test_export import Wrap
-from tests.predictors.test_export_attention import INF, _export, _outputs, _torch_values, randn
+from tests.predictors.test_export_attention import (
+    INF,
+    _export,
+    _outputs,
+    _torch_values,
+    assert_jacobians_match,
+    randn,
+)
 
 Module = TypeVar("Module", bound=nn.Module)
 
@@ -183,20 +190,7 @@ def assert_matches_torch(wrapped: nn.Module, inputs, symbol, *, fast_path: bool)
     for with_grad in (not fast_path, True):
         (expected,) = _torch_values(wrapped, inputs, with_grad=with_grad)
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-10)
-    symbols = [ca.MX.sym(f"a{i}", len(a)) for i, a in enumerate(args)]
-    (out,) = _outputs(function(*symbols))
-    for i, x in enumerate(inputs):
-        if x.dtype == torch.bool:
-            continue
-
-        def along(z, i=i):
-            xs = list(inputs)
-            xs[i] = z
-            return wrapped(*xs).reshape(-1)
-
-        jacobian = ca.Function("j", symbols, [ca.jacobian(out, symbols[i])])
-        torch_jacobian = torch.autograd.functional.jacobian(along, x).reshape(-1, x.numel())
-        np.testing.assert_allclose(np.asarray(jacobian(*args)), torch_jacobian.numpy(), rtol=0, atol=1e-8)
+    assert_jacobians_match(wrapped, function, inputs, args)
 
 
 @pytest.mark.parametrize("symbol", [ca.MX, ca.SX], ids=["MX", "SX"])
