@@ -61,8 +61,10 @@ def code_changes(earlier: Iterable[Any], now: dict[str, Any]) -> str:
     """What differs between ``now`` (this process's code: ``pipelines.plugins.code_with_plugins()``) and the
     identities earlier runs recorded, as the resume notes name it: "commit 0123456789ab -> 89abcdef0123,
     torch ..." (each key as the first earlier identity that differs had it; "plugin module:Class" for each
-    plugin's file that differs, "(none)" on the side without it), led by "code not recorded -> commit ..."
-    when one is no identity (a run from before the code was recorded); "" when every one is this code.
+    plugin's file that differs, "(none)" on the side without it; a commit that is None "(no git commit)"), led
+    by "code not recorded -> commit ..." when one is no identity (a run from before the code was recorded),
+    "code not recorded -> (no git commit, crowdmpc 0.1.0, Python ...)" where this code names no commit (an
+    installed wheel); "" when every one is this code.
     Uncommitted changes are compared by their diff's sha256 ("dirty" alone says nothing of which), where the
     earlier identity recorded one."""
     changed: dict[str, Any] = {}
@@ -82,11 +84,26 @@ def code_changes(earlier: Iterable[Any], now: dict[str, Any]) -> str:
             changed.setdefault(key, was.get(key, "(none)"))
     current = now | _plugin_items(now)
     shown = ", ".join(
-        f"{k} {str(was)[:12]} -> {str(current.get(k, '(none)'))[:12]}" for k, was in changed.items()
+        f"{k} {_value_text(k, was)} -> {_value_text(k, current.get(k, '(none)'))}"
+        for k, was in changed.items()
     )
     if unrecorded:
-        shown = f"code not recorded -> commit {str(now['commit'])[:12]}" + (f", {shown}" if shown else "")
+        shown = f"code not recorded -> {_this_code_text(now)}" + (f", {shown}" if shown else "")
     return shown
+
+
+def _value_text(key: str, value: Any) -> str:
+    """A recorded value as ``code_changes`` shows it, 12 characters; a commit that is None, said to be none
+    (an installed wheel's, a `ray job submit` copy's): "commit None" read as a commit of that name."""
+    return "(no git commit)" if key == "commit" and value is None else str(value)[:12]
+
+
+def _this_code_text(now: dict[str, Any]) -> str:
+    """What ``now``'s code is, in one item of ``code_changes``' list: its commit, or, for code without one,
+    its versions in parentheses (as ``no_commit_text`` says them: their commas are no items of the list)."""
+    if now.get("commit") is not None:
+        return f"commit {str(now['commit'])[:12]}"
+    return f"({no_commit_text(now) or 'no git commit'})"
 
 
 def _plugin_items(identity: dict[str, Any]) -> dict[str, Any]:

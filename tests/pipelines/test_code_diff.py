@@ -176,3 +176,34 @@ def test_code_without_a_git_commit_is_named_by_its_versions_as_the_table_names_i
     capsys.readouterr()
     assert main(["compare", f"r={tmp_path / 'r'}", f"r2={tmp_path / 'r'}", "--no-progress"]) == 0
     assert f"r: {tmp_path / 'r'}, 1 episode, code {said}\n" in capsys.readouterr().out
+
+
+def test_a_wheel_resuming_runs_of_unrecorded_or_git_code_names_what_it_is(tmp_path, capsys, monkeypatch):
+    """An installed wheel (no git checkout: commit None) resuming a sweep recorded before the code was said
+    "code not recorded -> commit None", and one recorded by a clone "commit 0123456789ab -> None": a commit
+    of that name, where this install has none and is known by its versions."""
+    wheel = {"version": "0.1.0", "commit": None, "dirty": None, "diff_sha256": None, "python": "3.11.7"}
+    wheel |= {"casadi": "3.6.7", "torch": "2.5.1", "numpy": "2.1.3"}
+    assert version.code_changes([None], wheel) == (
+        "code not recorded -> (no git commit, crowdmpc 0.1.0, Python 3.11.7, CasADi 3.6.7, torch 2.5.1, "
+        "numpy 2.1.3)"
+    )
+    clone = wheel | {"commit": "0123456789abcdef", "dirty": False}
+    assert version.code_changes([clone], wheel) == "commit 0123456789ab -> (no git commit)"
+    assert version.code_changes([wheel], clone) == "commit (no git commit) -> 0123456789ab"
+    assert version.code_changes([None], clone) == "code not recorded -> commit 0123456789ab"
+    # as the sweep's resume note says it
+    from tests.pipelines.test_table_code import ARGV
+
+    out = tmp_path / "s"
+    assert main([*ARGV, "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    meta = json.loads((out / "sweep.json").read_text())
+    del meta["runs"][0]["code"]
+    (out / "sweep.json").write_text(json.dumps(meta))
+    installed = version.code_identity() | wheel
+    monkeypatch.setattr(version, "code_identity", lambda: installed)
+    capsys.readouterr()
+    assert main([*ARGV, "--episodes-per-cell", "2", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "(code not recorded -> (no git commit, crowdmpc 0.1.0, Python 3.11.7, " in err
+    assert "None" not in err
