@@ -59,10 +59,17 @@ class EpisodeFailed(PipelineError):
 
 def one_line(text: str) -> str:
     """``text`` with its control characters (a newline, a carriage return, an escape sequence) and Unicode's
-    line and paragraph separators written as Python escapes (``\\n``, ``\\x1b``): the CLI's error line names
-    the user's paths and values, and a path holding a newline (``--config $'a\\nb.toml'``) ran its line over
-    two. Any other text, every ordinary message included, is returned as it is."""
+    line and paragraph separators written as Python escapes (``\\n``, ``\\x1b``): the CLI's error line and its
+    notes (``print_note``) name the user's paths and values, and a path holding a newline (``--config
+    $'a\\nb.toml'``) ran a line over two. Any other text, every ordinary message included, is returned as it
+    is."""
     return "".join(c.encode("unicode_escape").decode("ascii") if _breaks_line(c) else c for c in text)
+
+
+def print_note(text: str) -> None:
+    """Print ``text``, a note or warning of the CLI, on stderr as one line (``one_line``): a note names the
+    user's paths and values as an error does, and a path holding a newline ran it over two as well."""
+    print(one_line(text), file=sys.stderr)
 
 
 def _breaks_line(char: str) -> bool:
@@ -212,7 +219,7 @@ def warnings_as_notes() -> None:
             shown(message, category, filename, lineno, file, line)
         elif (out := file or sys.stderr) is not None:
             with contextlib.suppress(OSError):  # as Python's own: a note lost to a closed pipe raises nothing
-                print(f"note: {message}", file=out)
+                print(f"note: {one_line(str(message))}", file=out)
 
     show_any: Any = show
     show_any.crowdmpc_notes = True

@@ -21,7 +21,7 @@ from pipelines.commands.calibrate_store import (
     trained_on_notes,
 )
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 from predictors.errors import PredictorError
 
 if TYPE_CHECKING:
@@ -160,7 +160,7 @@ def _real(args: argparse.Namespace, predictor: Any) -> tuple[list, Any]:
     _check_real_horizon(args, predictor)
     files = protocol_files(args.data_dir, "paper", progress=args.progress)
     for note in trained_on_notes(args.predictor, files["val"], files["test"] if args.holdout else []):
-        print(note, file=sys.stderr)
+        print_note(note)
     sha256 = loaded_sha256(predictor)  # of the weights measured: the zoo's entry may be newer by now
     blocks, _ = calibrate_real(
         predictor, files["val"], args.alpha, args.horizon, root=prepared_dir(args.data_dir), sha256=sha256
@@ -293,7 +293,7 @@ def _check_first(args: argparse.Namespace) -> None:
         _check_closed_loop(args, holdout_margins, checkpoint_sha256(args.predictor))
         note = evaluation_seeds_note(args.seed, args.episodes)
         if note is not None:
-            print(note, file=sys.stderr)
+            print_note(note)
 
 
 def _check_closed_loop(args: argparse.Namespace, holdout_margins: MarginSpec, sha256: str | None) -> None:
@@ -374,7 +374,7 @@ def _calibrate(args: argparse.Namespace) -> int:
         for line in missing_class_margins(blocks):
             print(line)
     for note in wide_margins_notes(blocks):
-        print(note, file=sys.stderr)
+        print_note(note)
     if args.json is not None:
         payload = {
             "blocks": [b.to_json() for b in blocks],

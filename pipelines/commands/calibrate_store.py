@@ -15,13 +15,12 @@ import json
 import os
 import re
 import secrets
-import sys
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
 from pipelines.commands import comma_items
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 from predictors.durable import replace_durably
 from predictors.errors import PredictorError
 from predictors.locking import pid_alive, unless_held
@@ -289,7 +288,7 @@ def _store(blocks: list, args: argparse.Namespace) -> None:
     notes = [_replaced_note(block, in_force) for block in blocks]
     path = save_calibrations(blocks, check=lambda: _check_keeps_class_margins(blocks, args))
     for note in filter(None, notes):  # once they are stored: blocks refused replace nothing
-        print(note, file=sys.stderr)
+        print_note(note)
     print(f"wrote {len(blocks)} block(s) to {path}")
 
 

@@ -5,14 +5,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, write_output
 from pipelines.commands.output_paths import file_output_arg
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 from pipelines.plain_json import plain
 from pipelines.whole_files import save_figure
 from predictors.text_table import counted
@@ -363,7 +362,7 @@ def _identical(report: dict[str, Any]) -> int:
                 f"{differ} of {report['shared_episodes']} episodes of {label} differ from the first run's"
             )
     if problems:
-        print(f"crowdmpc compare: not identical: {'; '.join(problems)}", file=sys.stderr)
+        print_note(f"crowdmpc compare: not identical: {'; '.join(problems)}")
         return 1
     print(f"identical: {report['shared_episodes']} episodes, every metric equal")
     return 0

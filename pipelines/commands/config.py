@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from typing import TYPE_CHECKING, Any
 
 from pipelines.commands import examples
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
@@ -118,13 +117,12 @@ def _note_refused(config: RunConfig) -> None:
     try:
         check_contact_distance(config.world, config.mpc)
     except PipelineError as exc:
-        print(f"{refused} {exc}", file=sys.stderr)
+        print_note(f"{refused} {exc}")
     margins = parse_margins(config.controller.margins or "none")
     if margins.mode == "fixed" and len(margins.values) != config.mpc.horizon:
-        print(
+        print_note(
             f"{refused} fixed margins need one value per horizon step ({config.mpc.horizon}), got "
-            f"{len(margins.values)}",
-            file=sys.stderr,
+            f"{len(margins.values)}"
         )
 
 
@@ -154,7 +152,7 @@ def _show_recorded(args: argparse.Namespace) -> int:
     config = recorded_config(sweep_file, run_line, index)
     changed = zoo_note(args.from_sweep, _cell_keys(run_line))  # the printed run's cells: what a rerun plans
     if changed:  # on stderr too: a file piped into a rerun shows its comments to no one
-        print(f"note: {changed}", file=sys.stderr)
+        print_note(f"note: {changed}")
     notes = machine_note(config) + comment(changed)
     print(provenance(sweep_file, run_line, index, len(runs)) + notes + render(config), end="")
     return 0

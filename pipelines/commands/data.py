@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Final
 
@@ -13,7 +12,7 @@ from pipelines.commands import PREPARE_ROOM, check_writable, path_arg
 from pipelines.commands.data_synth import run_synth
 from pipelines.commands.evaluate import counted, seed_arg
 from pipelines.commands.output_paths import file_output_arg, output_arg
-from pipelines.errors import PipelineError, writes_named
+from pipelines.errors import PipelineError, print_note, writes_named
 
 # A synthetic episode takes ~30 ms and ~15 kB of scenes (7 humans): 100 000 (as `simulate --episodes`) is most
 # of an hour and 1.5 GB, far more than any training set here; 10^9 ran silently for days.
@@ -256,7 +255,8 @@ def run_stats(args: argparse.Namespace) -> int:
     _check_prepared_files(args.directory)
     table, notes = stats_report(args.directory)
     print(table)
-    print(*notes, sep="\n", end="\n" if notes else "", file=sys.stderr)
+    for note in notes:  # each names files: one line each, whatever their names hold
+        print_note(note)
     return 0
 
 

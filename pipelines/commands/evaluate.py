@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
@@ -12,7 +11,7 @@ from typing import TYPE_CHECKING, Final
 from pipelines.commands import check_data_files, check_writable, path_arg, write_output
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.commands.train_data import DATASET_SUFFIX, DEFAULT_DATASET, DEFAULT_PROTOCOL, PROTOCOLS
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
@@ -166,7 +165,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     located = None if args.predictor in PREDICTORS else locate(args.predictor)
     # before the load: an edited plugin whose weights no longer fit said why only in simulate
     for note in zoo_notes(args.predictor, None if located is None else located.entry):
-        print(note, file=sys.stderr)
+        print_note(note)
     predictor = load_predictor(args.predictor) if located is None else load_located(located)
     progress = False if args.no_progress else None  # None: a bar on a terminal only
     if args.test is not None:
@@ -197,16 +196,15 @@ def _evaluate(args: argparse.Namespace) -> int:
         print(f"protocol {args.protocol}, split {args.split}, data {root}")
     if trained is not None and root is not None and trained != args.protocol:
         # both protocols score the same test file: the option picks the files, not how the model was trained
-        print(
+        print_note(
             f"note: {args.predictor} was trained under protocol {trained!r}; --protocol {args.protocol} "
-            f"chooses the files scored, so these are not {args.protocol!r} results for this model",
-            file=sys.stderr,
+            f"chooses the files scored, so these are not {args.protocol!r} results for this model"
         )
     for note in filter(None, seen_notes(args.predictor, entry, files[args.split])):
-        print(note, file=sys.stderr)
+        print_note(note)
     print(format_table(result))
     if args.top_k is not None and result["top_k"] is None:
-        print(f"note: {args.predictor} has no sample(); --top-k ignored", file=sys.stderr)
+        print_note(f"note: {args.predictor} has no sample(); --top-k ignored")
     if args.json is not None:
         # strict JSON, as every record's (a non-finite figure null, never a bare NaN a strict reader refuses)
         write_output(args.json, json.dumps(plain(result), indent=2, allow_nan=False) + "\n", "--json")

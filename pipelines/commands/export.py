@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -12,7 +11,7 @@ from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from mpc.sizes import MAX_HORIZON  # the MPC's: the CasADi function unrolls H recursive steps
 from pipelines.commands import check_outside_the_zoos, check_writable, replace_file
 from pipelines.commands.output_paths import file_output_arg
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 from predictors.text_table import counted
 
 if TYPE_CHECKING:
@@ -179,14 +178,13 @@ def run(args: argparse.Namespace) -> int:
     entry = None if located is None else located.entry
     # before the load: an edited plugin whose weights no longer fit said why only in simulate
     for note in zoo_notes(args.name, entry):
-        print(note, file=sys.stderr)
+        print_note(note)
     predictor = load_predictor(args.name) if located is None else load_located(located)
     if (args.humans + args.robots) * args.horizon >= LONG_EXPORT and args.name not in PREDICTORS:
-        print(  # one CasADi call builds and checks it: Ctrl-C and kill -TERM wait for it to return
+        print_note(
             f"note: a net's twin for {args.humans + args.robots} agents over {args.horizon} steps takes long "
             "to build and check (here 9 s at 62 agents over 5 steps, 78 s over 20, 8 minutes over 100); an "
-            "interrupt waits for CasADi to return",
-            file=sys.stderr,
+            "interrupt waits for CasADi to return"
         )
     start = time.perf_counter()
     function = predictor.to_casadi(args.humans, args.robots, args.horizon)
@@ -215,5 +213,5 @@ def run(args: argparse.Namespace) -> int:
     print(f"  input  robots_future  ({args.horizon * args.robots * 2}, 1)  (H, M, 2) row-major")
     print(f"  output humans_future  ({args.horizon * args.humans * 2}, 1)  (H, N_h, 2) row-major")
     for note in _notes(predictor, args, entry):
-        print(note, file=sys.stderr)
+        print_note(note)
     return 0

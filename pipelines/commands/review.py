@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, Final
 
@@ -17,7 +16,7 @@ from pipelines.commands.review_notes import (
     warn_different_crowds,
 )
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
@@ -263,9 +262,9 @@ def _review(args: argparse.Namespace) -> int:
         other_run = digest(other, args.check) if other is not None else None
     for run in runs:
         if run.warning:
-            print(f"crowdmpc review: warning: {run.warning}", file=sys.stderr)
+            print_note(f"crowdmpc review: warning: {run.warning}")
         if run.problems_warning and not args.check:  # --check lists them all
-            print(f"crowdmpc review: warning: {run.problems_warning}", file=sys.stderr)
+            print_note(f"crowdmpc review: warning: {run.problems_warning}")
 
     checked = runs if args.path.is_dir() or other_run is None else [*runs, other_run]  # --compare's too
     failed = _check(checked, report) + n_unreadable if args.check else 0

@@ -17,7 +17,7 @@ from pipelines.commands.review_notes import (
     warn_mixed_code,
     warn_repeats,
 )
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 
 if TYPE_CHECKING:
     from pipelines.logs.digest import RunDigest
@@ -42,10 +42,9 @@ def read_folder(
     # its own files read: those of its subfolders are not (never mixed), which must not pass unsaid
     unread = unread_below(folder) if any(p.parent == folder for p in paths + unfinished) else 0
     for path in unfinished:
-        print(
+        print_note(
             f"crowdmpc review: warning: skipping {path}: unfinished (its run was killed or is still "
-            f"writing); `crowdmpc review {shlex.quote(str(path))}` reads what it holds",
-            file=sys.stderr,
+            f"writing); `crowdmpc review {shlex.quote(str(path))}` reads what it holds"
         )
     runs, unreadable = [], {}
     # a bar on a terminal only (disable=None): a sweep's thousands of files take minutes
@@ -87,10 +86,9 @@ def review_folder(
     parts = [group_parts(setup, named) for setup in setups]
     names = [", ".join(p) for p in parts]
     if len(setups) > 1:
-        print(
+        print_note(
             f"crowdmpc review: note: {folder} holds runs of {len(setups)} different set-ups "
-            f"({'; '.join(names)}): one aggregate for each, none over all",
-            file=sys.stderr,
+            f"({'; '.join(names)}): one aggregate for each, none over all"
         )
     report["groups"] = []
     for setup, name, repeated in zip(setups, names, repeats, strict=True):

@@ -5,11 +5,11 @@ one episode, another crowd), and the recordings of a folder that it did not read
 from __future__ import annotations
 
 import os
-import sys
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
+from pipelines.errors import print_note
 from predictors.text_table import counted
 
 if TYPE_CHECKING:
@@ -29,7 +29,7 @@ _FAILURES_ONLY: Final = (
 
 
 def warn(text: str) -> None:
-    print(f"{WARNING} {text}", file=sys.stderr)
+    print_note(f"{WARNING} {text}")
 
 
 def warn_failures_only(folder: Path, runs: list[RunDigest]) -> None:

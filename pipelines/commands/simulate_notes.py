@@ -4,8 +4,9 @@ pipelines.commands.simulate_reads)."""
 
 from __future__ import annotations
 
-import sys
 from typing import TYPE_CHECKING
+
+from pipelines.errors import print_note
 
 if TYPE_CHECKING:
     from pipelines.commands.simulate_reads import PredictorRead
@@ -35,5 +36,5 @@ def noted_reads(cfg: RunConfig, spec: ControllerSpec, checked: PredictorRead | N
         *calibration_notes(spec, cfg, read.calibration, entry),
     )
     for note in filter(None, notes):
-        print(note, file=sys.stderr)
+        print_note(note)
     return read

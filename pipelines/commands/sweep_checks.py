@@ -4,7 +4,6 @@ the MPC's d_min."""
 
 from __future__ import annotations
 
-import sys
 from functools import partial
 from typing import TYPE_CHECKING, Any, Final
 
@@ -21,7 +20,7 @@ from pipelines.commands.simulate_checks import horizon_note, size_note, toleranc
 from pipelines.commands.sweep_predictors import PlanModels, check_predictors, read_predictors
 from pipelines.commands.team_notes import flock_note, goal_room_note, separate_goals_note
 from pipelines.config.schema import MPC_FROM_WORLD
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 from pipelines.loop.margins_read import Refused, block_of, look_up, read_once
 
 if TYPE_CHECKING:
@@ -58,14 +57,14 @@ def noted_models(experiment: Experiment, cfg: RunConfig | None, cells: Iterable[
             take_back_before_planning(cell.spec.margins for cell in cells)  # before any block is read
     except (PipelineError, PredictorError):
         for note in method_notes(cells):
-            print(note, file=sys.stderr)
+            print_note(note)
         raise
     try:  # a refusal kept for check_plan to raise after the couplings' check
         models = models._replace(blocks=planned_margins(experiment, models.loaded, models.entries))
     except (PipelineError, ValueError, OSError):  # check_plan runs it again, after the couplings' check
         pass
     for note in method_notes(cells, models.entries, models.blocks):
-        print(note, file=sys.stderr)
+        print_note(note)
     if models.refused is not None:
         raise models.refused
     return models

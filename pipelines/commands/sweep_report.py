@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from pipelines.commands.sweep_log_read import episode_rows, read_log
 from pipelines.commands.sweep_table_notes import code_note, not_counted_note
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 from predictors.text_table import counted
 
 if TYPE_CHECKING:
@@ -111,7 +111,7 @@ def report(
     _write(config, cells, tasks, log, workers)
     changed = "" if zoo is None else zoo.note()
     if changed:
-        print(f"note: {changed}", file=sys.stderr)
+        print_note(f"note: {changed}")
 
 
 def _note_unrun_cells(cells: tuple[Cell, ...], recorded: set[str]) -> None:
@@ -120,10 +120,9 @@ def _note_unrun_cells(cells: tuple[Cell, ...], recorded: set[str]) -> None:
     reported before it ran vanished without a word."""
     unrun = [f"{c.method!r} ({counted(c.n_humans, 'human')})" for c in cells if c.key not in recorded]
     if unrun:
-        print(
+        print_note(
             f"note: --report-only: no episode of {len(unrun)} planned cells, left out of the table: "
-            f"{', '.join(unrun)}; run the sweep without --report-only to run them",
-            file=sys.stderr,
+            f"{', '.join(unrun)}; run the sweep without --report-only to run them"
         )
 
 
@@ -159,7 +158,7 @@ def _write(
     note = "\n\n".join(line for line in (note, code_note(config.out, log.runs)) if line)
     report = write_report_of(config.out, config.experiment, summaries, rows, note)
     print(report.markdown)
-    print("wrote " + ", ".join(str(p) for p in report.files), file=sys.stderr)
+    print_note("wrote " + ", ".join(str(p) for p in report.files))
     cpu = [log.cpu[i] for i in range(len(log.cpu))]
     if cpu:
         # CPU time, unlike wall time, does not depend on what else runs on the machine: an honest projection.

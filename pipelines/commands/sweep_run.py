@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from typing import TYPE_CHECKING
 
-from pipelines.errors import EPISODES_RAISED
+from pipelines.errors import EPISODES_RAISED, print_note
 
 if TYPE_CHECKING:
     from pipelines.commands.sweep_log_read import LogRead
@@ -24,10 +24,9 @@ def _note_retried(config: SweepConfig) -> None:
 
     retried = error_keys(config.out) & {t.key for t in config.tasks()}
     if retried:
-        print(
+        print_note(
             f"note: {config.out / ERRORS_FILE} lists {len(retried)} episode(s) of this plan that raised in "
-            "an earlier run; each is recorded since (the file keeps their tracebacks)",
-            file=sys.stderr,
+            "an earlier run; each is recorded since (the file keeps their tracebacks)"
         )
 
 
@@ -62,14 +61,13 @@ def run_cells(
         if outcome.ran
         else ""
     )
-    print(
+    print_note(
         f"{config.experiment.name}: {done}/{outcome.planned} episodes recorded ({outcome.ran} this run in "
-        f"{outcome.wall_s:.0f} s{rate}, backend {outcome.backend or '-'})",
-        file=sys.stderr,
+        f"{outcome.wall_s:.0f} s{rate}, backend {outcome.backend or '-'})"
     )
     if outcome.errors:
         raised = f"{len(outcome.errors)} episode{'' if len(outcome.errors) == 1 else 's'} raised"
-        print(f"{raised}; see {config.out / 'errors.jsonl'} (a rerun retries)", file=sys.stderr)
+        print_note(f"{raised}; see {config.out / 'errors.jsonl'} (a rerun retries)")
         status = EPISODES_RAISED
     elif outcome.complete:
         _note_retried(config)
@@ -79,6 +77,6 @@ def run_cells(
     elif outcome.interrupted:  # no backend: stopped while it started (joining a cluster), before any episode
         again = "resume" if outcome.backend or outcome.already_done else "start it"
         why = "" if outcome.backend else " (stopped while its workers started: no episode ran this run)"
-        print(f"interrupted: rerun the same command to {again}{why}{cut_note(outcome.cut)}", file=sys.stderr)
+        print_note(f"interrupted: rerun the same command to {again}{why}{cut_note(outcome.cut)}")
         status = INTERRUPTED
     return status, outcome.workers

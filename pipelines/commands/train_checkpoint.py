@@ -23,7 +23,7 @@ from lightning.pytorch.plugins import TorchCheckpointIO
 from pipelines.commands import replace_file
 from pipelines.commands.train_epochs import stopped_after
 from pipelines.commands.train_resume import relocated
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 from pipelines.whole_files import remove_killed_temporaries
 from predictors.checkpoint import load_checkpoint, load_tensors
 from predictors.errors import PredictorError
@@ -363,7 +363,7 @@ def check_divergence(args: argparse.Namespace, divergence: Any, best: Any) -> No
             f"written. A net whose steps are NaN (a division, log or sqrt at 0, such as an agent's distance "
             f"to itself) or a learning rate too high (--lr {args.lr:g}) does this"
         )
-    print(f"training stopped: {what}; the best epoch before it is kept", file=sys.stderr)
+    print_note(f"training stopped: {what}; the best epoch before it is kept")
 
 
 def check_saved_predicts(model: str, weights: Path, out: Path) -> None:

@@ -6,12 +6,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 from pathlib import Path
 from typing import Any, Final
 
 from pipelines.commands import check_data_files, path_arg
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 
 # The protocols and test sequences of the commands' options (train, evaluate, zoo add), written here rather
 # than imported from predictors.data.locate, whose numpy and trajnetplusplustools cost a parser 3 s; the same
@@ -190,10 +189,9 @@ def note_shared_data(files: dict[str, list[Path]], hashes: dict[str, str]) -> No
                 continue
             other_split, first = seen[sha]
             other = f"--{other_split}" if first.resolve() == path.resolve() else f"--{other_split} {first}"
-            print(
+            print_note(
                 f"note: --{split} {path} holds the same data as {other} (sha256 {sha[:12]}…): "
-                f"{consequence[split]}",
-                file=sys.stderr,
+                f"{consequence[split]}"
             )
 
 

@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 from typing import Any, Final
 
 from pipelines.commands import replace_file
 from pipelines.commands.train_resume import SETTINGS_FILE, early_stopping_state
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 from predictors.checkpoint import load_tensors
 from predictors.text_table import counted
 
@@ -86,10 +85,9 @@ def _stopped_by_patience(out: Path, epochs: int) -> int | None:
             "fewer: resume it without --epochs to write what its stop left out"
         )
     if stopped is not None:
-        print(
+        print_note(
             f"note: --resume: {out} stopped after {stopped} epochs, its --patience run out; this resume "
-            "trains no epoch and writes its outputs",
-            file=sys.stderr,
+            "trains no epoch and writes its outputs"
         )
     return stopped
 

@@ -8,11 +8,10 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import sys
 from pathlib import Path
 from typing import Any, Final
 
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 from predictors.checkpoint import check_name, load_tensors
 from predictors.errors import DuplicateKey, PredictorError, short_key, unique_keys
 
@@ -173,7 +172,7 @@ def say_taken(
     if shown:
         # "the run's batch_size 2, its net config": a name after the first values reads as the run's too
         shown = [shown[0]] + [f"its {s}" if s in _NOUNS else s for s in shown[1:]]
-        print(f"--resume: {out} goes on with the run's {', '.join(shown)}", file=sys.stderr)
+        print_note(f"--resume: {out} goes on with the run's {', '.join(shown)}")
 
 
 def recorded_loss(recorded: dict[str, Any] | None, last: Path) -> str | None:
@@ -232,10 +231,9 @@ def note_other_code(out: Path, recorded: dict[str, Any] | None) -> None:
         return
     shown = code_changes([recorded.get("code")], code_with_plugins())
     if shown:
-        print(
+        print_note(
             f"note: --resume: {out} was started by other code ({shown}); its epochs so far were trained by "
-            "that code and the next by this one, and the metrics file will name this code only",
-            file=sys.stderr,
+            "that code and the next by this one, and the metrics file will name this code only"
         )
 
 

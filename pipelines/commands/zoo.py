@@ -5,13 +5,12 @@ from __future__ import annotations
 import argparse
 import json
 import shlex
-import sys
 from pathlib import Path
 from typing import Any
 
 from pipelines.commands import examples, path_arg
 from pipelines.commands.zoo_list import quick_check_line, run_list
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 
 EPILOG = """examples:
   crowdmpc zoo list
@@ -167,7 +166,7 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps({**located.entry.to_json(), "zoo": located.source}, indent=2))
         never = registry.never_loads(located)  # a user entry named as a built-in predictor
         if never is not None:
-            print(f"note: {never}", file=sys.stderr)
+            print_note(f"note: {never}")
         return 0
     if args.zoo_command == "verify":
         results = zoo.verify_entries(args.dir)
@@ -336,7 +335,7 @@ def _add(args: argparse.Namespace) -> int:
     # quoted as simulate, evaluate and export name the model in the same note
     note = quick_check_line(repr(entry.name), entry.training)
     if note is not None:  # docs/extending.md: such a model is never mistaken for a trained one
-        print(note, file=sys.stderr)
+        print_note(note)
     return 0
 
 

@@ -20,14 +20,13 @@ import contextlib
 import itertools
 import os
 import signal
-import sys
 import threading
 import time
 import warnings
 from collections.abc import Iterable, Iterator
 from typing import Any, Final, Protocol
 
-from pipelines.errors import PipelineError, SweepStopped, quiet_team_warnings
+from pipelines.errors import PipelineError, SweepStopped, print_note, quiet_team_warnings
 from pipelines.experiments.process_backend import CLOSE_GRACE_S, MAX_BREAKS_IN_A_ROW, ProcessBackend
 from pipelines.experiments.ray_join import (
     RAY_ADDRESS_ENV,
@@ -217,10 +216,9 @@ class RayBackend:
                 earlier, now, commits = _comparable(driver, code)
                 if not commits and node not in self._uncommitted_nodes:
                     self._uncommitted_nodes.add(node)
-                    print(
+                    print_note(
                         f"note: the Ray worker on {node} or the driver names no commit (an installed "
-                        "package): their code is compared by version, Python, libraries and plugins only",
-                        file=sys.stderr,
+                        "package): their code is compared by version, Python, libraries and plugins only"
                     )
                 differ = code_changes(earlier, now)
             if differ:

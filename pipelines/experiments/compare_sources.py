@@ -16,7 +16,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Final
 
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 from pipelines.experiments.log import SWEEP_FILE, episode_log, read_sweep_file
 from pipelines.experiments.run_lines import run_number, runs_named
 from pipelines.version import CODE_VERSIONS, dirty_text, no_commit_text
@@ -62,7 +62,7 @@ def _run_lines(path: Path, named: set[int | None]) -> list[Any]:
     try:
         runs = read_sweep_file(path / SWEEP_FILE, hint="").get("runs", [])
     except (PipelineError, OSError) as exc:  # `sweep --report-only` refuses it: compare goes on, saying so
-        print(f"note: {exc}; its episodes are compared without the code they ran", file=sys.stderr)
+        print_note(f"note: {exc}; its episodes are compared without the code they ran")
         return []
     return runs_named(runs, named)
 
@@ -212,7 +212,7 @@ def _refuse_sweep_recordings(path: Path, label: str) -> None:
 
 
 def _warn(label: str, text: str) -> None:
-    print(f"crowdmpc compare: warning: {label}: {text}", file=sys.stderr)
+    print_note(f"crowdmpc compare: warning: {label}: {text}")
 
 
 def commit_text(code: Any) -> str | None:

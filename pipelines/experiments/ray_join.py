@@ -12,12 +12,11 @@ from __future__ import annotations
 
 import json
 import os
-import sys
 import threading
 from pathlib import Path
 from typing import Any, Final
 
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 from pipelines.experiments.ray_stderr import repeats_said_once
 
 JOIN_PROBE_S: Final[float] = 10.0  # a cluster's head answers a connection at once; a firewall drops it
@@ -43,10 +42,9 @@ def address_from_environment() -> str | None:
 
 
 def joining_from_environment(address: str) -> None:
-    print(
+    print_note(
         f"note: joining the Ray cluster at {RAY_ADDRESS_ENV}={address!r}, as ray.init does; set "
-        f"{RAY_ADDRESS_ENV}=local (or unset it) for a Ray of this machine's own",
-        file=sys.stderr,
+        f"{RAY_ADDRESS_ENV}=local (or unset it) for a Ray of this machine's own"
     )
 
 
@@ -273,10 +271,9 @@ def _is_grpc(first: bytes) -> bool:
 
 
 def _still_joining(address: str) -> None:
-    print(
+    print_note(
         f"note: still joining the Ray cluster at {address!r} after {JOIN_NOTE_S:g} s (Ray retries while the "
-        "cluster does not answer); Ctrl-C stops, and nothing has run",
-        file=sys.stderr,
+        "cluster does not answer); Ctrl-C stops, and nothing has run"
     )
 
 
@@ -331,10 +328,9 @@ def workers_that_fit(ray: Any, address: str, workers: int) -> int:
         return workers
     fit = max(cpus, 1)
     wait = "; that one waits for a CPU another job frees" if cpus == 0 else ""
-    print(
+    print_note(
         f"note: the Ray cluster at {address!r} has {cpus} CPU{'' if cpus == 1 else 's'} free for --workers "
         f"{workers}: the sweep runs {fit} worker{'' if fit == 1 else 's'}{wait} (an autoscaling cluster "
-        "adds nodes only for work that waits: start its nodes before the sweep)",
-        file=sys.stderr,
+        "adds nodes only for work that waits: start its nodes before the sweep)"
     )
     return fit

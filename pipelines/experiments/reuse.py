@@ -24,14 +24,13 @@ from __future__ import annotations
 
 import contextlib
 import os
-import sys
 from collections import Counter
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, print_note
 from pipelines.experiments.cells import Experiment
 from pipelines.experiments.log import (
     EPISODES_FILE,
@@ -158,7 +157,7 @@ def seed_from(
     took. ``progress``, ``checked``: ``taken``'s."""
     found = taken(source, out, tasks, repair=True, progress=progress, checked=checked)
     if not found.runs_there:
-        print(f"--reuse {source}: none of its episodes is one of this plan's left to run", file=sys.stderr)
+        print_note(f"--reuse {source}: none of its episodes is one of this plan's left to run")
         return meta
     runs = meta.setdefault("runs", [])
     numbers = {(r.get(REUSED), r.get("run_there")): k for k, r in enumerate(runs, start=1) if is_reused(r)}
@@ -185,10 +184,9 @@ def seed_from(
     _append(out / EPISODES_FILE, source, by_key, run_of, progress)
     folders = {key: _folder(source, runs[number - 1][REUSED]) for key, number in run_of.items()}
     cells = len({task.cell.key for task in by_key.values()})
-    print(
+    print_note(
         f"reused {len(by_key)} episode(s) of {cells} cell(s) from {source} ({len(set(run_of.values()))} of "
-        f"its runs){_recordings(by_key, folders)}",
-        file=sys.stderr,
+        f"its runs){_recordings(by_key, folders)}"
     )
     return meta
 

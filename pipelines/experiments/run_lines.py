@@ -7,12 +7,11 @@ those episodes, not a run here). Written whole, in one rename (``write_sweep_fil
 from __future__ import annotations
 
 import json
-import sys
 from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
-from pipelines.errors import PipelineError, writes_named
+from pipelines.errors import PipelineError, print_note, writes_named
 from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE, write_whole
 from pipelines.experiments.record_checks import DAMAGED
 from pipelines.plain_json import plain
@@ -81,10 +80,9 @@ def lost_runs(out: Path, listed: int, last: int, began: int | None = None) -> li
             f"{out / EPISODES_FILE}: a record names run {last}, {lost} past the {listed} {SWEEP_FILE} lists; "
             f"{DAMAGED}"
         )
-    print(
+    print_note(
         f"note: {out / EPISODES_FILE} holds episodes of {lost} run(s) {SWEEP_FILE} does not list; they are "
-        "kept as runs of unknown code (a new --out starts afresh)",
-        file=sys.stderr,
+        "kept as runs of unknown code (a new --out starts afresh)"
     )
     began = last + 1 if began is None else began
     return [{"lost": f"not listed in {SWEEP_FILE} when run {began} began"} for _ in range(lost)]

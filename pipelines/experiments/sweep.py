@@ -29,7 +29,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
-from pipelines.errors import PipelineError, SweepStopped
+from pipelines.errors import PipelineError, SweepStopped, print_note
 from pipelines.experiments.backends import Backend, check_backend, make_backend
 from pipelines.experiments.checked_calibrations import Checked, checked_inputs, with_checked_calibrations
 from pipelines.experiments.checked_weights import stopped_by, with_checked_weights
@@ -171,11 +171,10 @@ def _note_other_code(out: Path, runs: list[dict[str, Any]]) -> None:
     )
     shown = "; ".join(filter(None, [shown, unknown]))
     if shown:  # every resume says it, not only the first after the change: the mix stays in the directory
-        print(
+        print_note(
             f"note: {out} holds episodes made by other code ({shown}); they are kept, and a table of cells "
             "holding both mixes them (table.md's Code line names what it tabulates; a new --out keeps one "
-            "codebase per table)",
-            file=sys.stderr,
+            "codebase per table)"
         )
 
 
@@ -220,7 +219,7 @@ def run_sweep(
         recorded = read_recorded(out, tasks, config.progress, repair=True, records=records, checked=checked)
         note = recorded.outside_note()
         if note is not None:
-            print(note, file=sys.stderr)
+            print_note(note)
         # A refused resume is no run, nor a backend that could not start: the run's line is added once the
         # backend has started (an interrupted run is recorded), or at once when there is nothing to run.
         add_run = functools.partial(

@@ -23,7 +23,6 @@ import re
 import resource
 import shutil
 import socket
-import sys
 import tempfile
 import time
 import traceback
@@ -33,7 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
-from pipelines.errors import PipelineError, interrupt_behind
+from pipelines.errors import PipelineError, interrupt_behind, print_note
 from pipelines.experiments.checked_calibrations import controller_reads
 from pipelines.experiments.checked_weights import WeightsReplaced, check_loaded_weights
 from pipelines.experiments.deadline import EpisodeTimeout, check_timeout, deadline, timeout_error
@@ -295,11 +294,9 @@ class EpisodeWorker:
             with deadline(self.timeout_s):
                 controller.close()
         except EpisodeTimeout:
-            print(
-                f"note: controller {name!r}'s close() did not return in {self.timeout_s:g} s", file=sys.stderr
-            )
+            print_note(f"note: controller {name!r}'s close() did not return in {self.timeout_s:g} s")
         except Exception as exc:  # an episode's record is written already: say it, do not end the sweep
-            print(f"note: controller {name!r}'s close() raised {type(exc).__name__}: {exc}", file=sys.stderr)
+            print_note(f"note: controller {name!r}'s close() raised {type(exc).__name__}: {exc}")
 
     def close(self) -> None:
         """Close every controller built (the sweep's end; the process backend's workers at their exit)."""
