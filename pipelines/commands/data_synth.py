@@ -121,11 +121,17 @@ def _remove_dead_staged(out: Path) -> None:
 
 
 def _provenance(path: Path) -> dict | None:
-    """The provenance document at ``path``; None when it is none (missing, unreadable, not JSON)."""
+    """The provenance document at ``path``; None when it is none (missing, unreadable, not JSON).
+    PipelineError naming it for a key given twice: json kept the last without a word, so whose data it
+    records ("data") could not be told; refused, as every JSON file a user may edit is (``unique_keys``)."""
     import json
 
+    from predictors.errors import DuplicateKey, unique_keys
+
     try:
-        document = json.loads(path.read_text(encoding="utf-8"))
+        document = json.loads(path.read_text(encoding="utf-8"), object_pairs_hook=unique_keys)
+    except DuplicateKey as exc:  # before ValueError, which it is
+        raise PipelineError(f"{path}: {exc}") from None
     # ValueError: UnicodeDecodeError, JSONDecodeError and an integer past Python's 4300 digits, which json
     # raises as a plain ValueError; RecursionError: nesting past the stack (json's parser recurses)
     except (OSError, ValueError, RecursionError):

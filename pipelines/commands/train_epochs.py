@@ -13,6 +13,7 @@ from pipelines.commands import replace_file
 from pipelines.commands.train_resume import SETTINGS_FILE, early_stopping_state
 from pipelines.errors import PipelineError, print_note
 from predictors.checkpoint import load_tensors
+from predictors.errors import DuplicateKey, unique_keys
 from predictors.text_table import counted
 
 DEFAULT_EPOCHS: Final[int] = 25
@@ -53,9 +54,13 @@ def record_epochs(out: Path, recorded: dict[str, Any], epochs: int) -> None:
 def _check_not_stopped_early(out: Path, metrics: Path) -> None:
     """PipelineError when the finished run in ``out`` (``metrics``: its NAME.metrics.json) was ended by its
     --patience: a resume would restore the stop's count and end the fit again after an epoch or go on past
-    the stop, either way other weights than the run's under its settings."""
+    the stop, either way other weights than the run's under its settings. A key given twice in ``metrics`` is
+    refused naming it, as in every JSON file a user may edit (``unique_keys``): json kept the last."""
     try:
-        training = json.loads(metrics.read_text(encoding="utf-8")).get("training", {})
+        document = json.loads(metrics.read_text(encoding="utf-8"), object_pairs_hook=unique_keys)
+        training = document.get("training", {})
+    except DuplicateKey as exc:  # before ValueError, which it is
+        raise PipelineError(f"--resume: {metrics}: {exc}") from None
     # the run's other checks say what is wrong with it; RecursionError: nesting past the stack (json's parser
     # recurses), damage as the others are
     except (OSError, ValueError, AttributeError, RecursionError):

@@ -36,7 +36,7 @@ from predictors.data.ewap import EWAP_SEQUENCES, SPLITS
 from predictors.data.prepare import CONVERTER_VERSION, STAGING_INFIX, prepare_ewap
 from predictors.data.selfcheck import default_references
 from predictors.data.validate import require_file
-from predictors.errors import PredictorError
+from predictors.errors import DuplicateKey, PredictorError, unique_keys
 from predictors.hashing import sha256_file
 from predictors.home import expand_home, home_dir
 from predictors.locking import locked, pid_alive
@@ -133,11 +133,16 @@ def read_manifest(directory: Path) -> dict | None:
 
 
 def load_manifest(directory: Path) -> dict | None:
+    """The prepared manifest in ``directory``; None where there is none or it is unreadable (every reader then
+    says to prepare the folder again); PredictorError naming it for a key given twice, which json read as the
+    last without a word, as every JSON file a user may edit is refused (``unique_keys``)."""
     manifest_path = directory / "manifest.json"
     if not manifest_path.is_file():
         return None
     try:
-        manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
+        manifest = json.loads(manifest_path.read_text(encoding="utf-8"), object_pairs_hook=unique_keys)
+    except DuplicateKey as exc:  # before ValueError, which it is
+        raise PredictorError(f"{manifest_path}: {exc}") from None
     # ValueError: UnicodeDecodeError, JSONDecodeError and an integer past Python's 4300 digits, which json
     # raises as a plain ValueError; RecursionError: nesting past the stack (json's parser recurses)
     except (OSError, ValueError, RecursionError):

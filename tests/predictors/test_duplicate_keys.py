@@ -1,5 +1,6 @@
 """The JSON files a user may edit by hand (a zoo's manifest, a predictor's config, a calibrations file, a
-training run's train_settings.json) name each key once: json keeps the last of a key given twice without a
+training run's train_settings.json and NAME.metrics.json, a prepared data manifest, a synth provenance file)
+name each key once: json keeps the last of a key given twice without a
 word, so a value typed above the one already there did nothing. The shipped and written files do."""
 
 import json
@@ -90,3 +91,46 @@ def test_the_advice_is_the_errors_own_so_every_reader_gives_it_alike():
     with pytest.raises(PipelineError) as exc:
         parse_net_config('{"hidden_dim": 32, "hidden_dim": 64}')
     assert str(exc.value) == f"--net-config: the key 'hidden_dim' {advice}"
+
+
+ADVICE = "appears twice in one object; give each key once (json would keep the last)"
+
+
+def test_a_prepared_data_manifest_with_a_key_twice_is_refused(tmp_path):
+    """A prepared folder's manifest.json ({"files": {...}, "files": {}}) was read as its last "files": one
+    listing no file, whose splits were then checked against nothing."""
+    from predictors.data.locate import load_manifest, prepared_dir
+
+    path = tmp_path / "manifest.json"
+    path.write_text('{"format": "crowdmpc-prepared", "files": {"a": 1}, "files": {}}', encoding="utf-8")
+    for read in (load_manifest, prepared_dir):
+        with pytest.raises(PredictorError) as exc:
+            read(tmp_path)
+        assert str(exc.value) == f"{path}: the key 'files' {ADVICE}"
+
+
+def test_a_synth_provenance_file_with_a_key_twice_is_refused(tmp_path, capsys):
+    """`data synth --out x.ndjson` reads x.synth.json beside it to tell whose data it records ("data"): one
+    naming "data" twice was read as its last, and another file's provenance could be taken for --out's."""
+    from pipelines.cli import main
+
+    out = tmp_path / "x.ndjson"
+    provenance = tmp_path / "x.synth.json"
+    provenance.write_text('{"format": "crowdmpc-synth", "data": "y.ndjson", "data": "x.ndjson"}', "utf-8")
+    capsys.readouterr()
+    argv = ["data", "synth", "--out", str(out), "--episodes", "1", "--humans", "1", "--seed", "0"]
+    assert main([*argv, "--no-progress", "--replace"]) == 2
+    assert capsys.readouterr().err == f"crowdmpc data synth: error: {provenance}: the key 'data' {ADVICE}\n"
+    assert not out.exists()
+
+
+def test_a_metrics_file_with_a_key_twice_is_refused_on_a_resume(tmp_path):
+    """A finished run's NAME.metrics.json, read by --resume for the epochs its --patience stopped it after,
+    was read as its last "training" without a word."""
+    from pipelines.commands.train_epochs import check_more_epochs
+
+    metrics = tmp_path / "net.metrics.json"
+    metrics.write_text('{"training": {"stopped_early_after": 3}, "training": {}}', encoding="utf-8")
+    with pytest.raises(PipelineError) as exc:
+        check_more_epochs(tmp_path, 10, 5, metrics)
+    assert str(exc.value) == f"--resume: {metrics}: the key 'training' {ADVICE}"
