@@ -30,6 +30,7 @@ from mpc.dynamics import braking
 from mpc.errors import MPCConfigError
 from mpc.fastcall import BufferedFunction
 from mpc.local_params import LocalParams, flock_distances
+from mpc.sizes import check_team
 from mpc.solvers import SOLVED, Solution, _Solver, better
 from mpc.step_data import StepData
 
@@ -107,6 +108,7 @@ class JointNLP:
         takes most of the build (4 of 4.4 s at 12 robots, and a gcc compile with ``jit``), is then built by
         the first ``solve``. DMPC evaluates F with this NLP and solves it only for its pair moves."""
         check_solvable(cfg)
+        n_robots, n_humans = check_team(n_robots, n_humans)
         self.cfg, self.n_robots, self.n_humans = cfg, n_robots, n_humans
         h, m = cfg.horizon, n_robots
         self.n_pairs = m * (m - 1) // 2
@@ -278,6 +280,7 @@ class LocalNLP:
 
     def __init__(self, cfg: MPCConfig, n_robots: int, n_humans: int):
         check_solvable(cfg)
+        n_robots, n_humans = check_team(n_robots, n_humans, least_robots=1)
         self.cfg, self.n_robots, self.n_humans = cfg, n_robots, n_humans
         h, n_others = cfg.horizon, n_robots - 1
         u = ca.SX.sym("u", 2 * h)

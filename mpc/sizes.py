@@ -5,10 +5,12 @@ sensible value: a typo of a few zeros would otherwise run for hours before anyth
 
 Unlike ``mpc.config.MPC_BOUNDS``, which the NLP checks as it is built so that a sweep folder that ran beyond a
 bound added since reads back, these refuse every ``MPCConfig``: the config schema has refused the same values
-since sweeps recorded their configs, so no recorded folder holds one."""
+since sweeps recorded their configs, so no recorded folder holds one. ``check_team``: the team an NLP is built
+for, a count of robots and of humans."""
 
 from __future__ import annotations
 
+import operator
 from typing import Any, Final
 
 from mpc.errors import MPCConfigError
@@ -47,3 +49,20 @@ def check_step_time(seconds: float) -> None:
     """``time_limit_s``, already a finite number > 0, within ``MOST_STEP_TIME``."""
     if seconds > MOST_STEP_TIME:
         raise MPCConfigError(f"time_limit_s must be in (0, {MOST_STEP_TIME:g}] s, got {seconds!r}")
+
+
+def check_team(n_robots: Any, n_humans: Any, least_robots: int = 0) -> tuple[int, int]:
+    """The team an NLP is built for as plain ints (numpy's too), ``n_robots`` >= ``least_robots`` and
+    ``n_humans`` >= 0, else a ValueError naming the one that is not: CasADi refused them in its own words
+    ("Dimensions must be non-negative, got -8-by-1", or its overloads of ``SX.sym`` for 2.5 robots)."""
+    counts = []
+    for name, value, least in (("n_robots", n_robots, least_robots), ("n_humans", n_humans, 0)):
+        try:
+            count = None if isinstance(value, bool) else operator.index(value)
+        except TypeError:
+            count = None
+        if count is None or count < least:
+            why = " (a local NLP is one robot's)" if name == "n_robots" and least > 0 else ""
+            raise ValueError(f"{name} must be an integer >= {least}{why}, got {value!r}")
+        counts.append(count)
+    return counts[0], counts[1]

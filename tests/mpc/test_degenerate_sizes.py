@@ -68,3 +68,34 @@ def test_a_step_of_another_team_size_is_refused_by_name(solver):
     data = StepData(states, np.zeros((2, 2)), states[:, :2] + [0.0, 5.0], np.ones(2, dtype=bool))
     with pytest.raises(ValueError, match=r"^StepData holds 2 robots, but this NLP was built for 3"):
         solver(cfg, 3, 1).solve(data, lambda _: np.zeros((cfg.horizon, 1, 2)), PlanMemory(cfg).start(data))
+
+
+@pytest.mark.parametrize("solver", [JointNLP, LocalNLP, CMPC, DMPC])
+@pytest.mark.parametrize(
+    ("n_robots", "n_humans", "named"),
+    [
+        (-1, 2, "n_robots"),
+        (2, -1, "n_humans"),
+        (2.5, 2, "n_robots"),
+        (2, "7", "n_humans"),
+        (True, 2, "n_robots"),
+    ],
+)
+def test_a_team_size_that_is_no_count_is_refused_by_name(solver, n_robots, n_humans, named):
+    """CMPC(cfg, -1, 2) failed in CasADi ("Dimensions must be non-negative, got -8-by-1"), 2.5 robots with
+    the list of CasADi's overloads of SX.sym: neither named the size."""
+    with pytest.raises(ValueError, match=rf"^{named} must be an integer >= "):
+        solver(MPCConfig(), n_robots, n_humans)
+
+
+@pytest.mark.parametrize("solver", [LocalNLP, DMPC])
+def test_a_local_nlp_needs_a_robot(solver):
+    """The local NLP is one robot's (Eq. 5): no robot failed in CasADi ("got -1-by-1")."""
+    with pytest.raises(ValueError, match=r"^n_robots must be an integer >= 1 \(a local NLP is one robot's"):
+        solver(MPCConfig(), 0, 2)
+
+
+def test_numpy_counts_still_build():
+    """Sizes from numpy (a sweep over np.arange) built before and still do, as plain ints."""
+    nlp = JointNLP(MPCConfig(), np.int64(2), np.int64(1))
+    assert (nlp.n_robots, nlp.n_humans) == (2, 1) and type(nlp.n_robots) is int
