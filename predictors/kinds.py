@@ -8,18 +8,15 @@ import dataclasses
 import inspect
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Final, cast
+from typing import TYPE_CHECKING, Any, cast
 
 from predictors.errors import PredictorError, short_repr
+from predictors.net_size import MAX_PARAMETERS
 
 if TYPE_CHECKING:
     import torch
 
     from predictors.learned import LearnedPredictor
-
-# Every net, shipped or plugin, is bounded like the shipped Social-LSTM (nets/social_lstm.MAX_PARAMETERS):
-# a config is a file anyone can edit, and its sizes are checked on the meta device before memory is taken.
-MAX_PARAMETERS: Final[int] = 10_000_000
 
 
 @dataclass(frozen=True)

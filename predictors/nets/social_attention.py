@@ -27,6 +27,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from predictors.errors import PredictorError
+from predictors.net_size import MAX_PARAMETERS
 from predictors.nets.config_checks import (
     check_choice,
     check_int,
@@ -37,7 +38,7 @@ from predictors.nets.config_checks import (
 )
 from predictors.nets.contract import Head
 from predictors.nets.rollout import TeacherForcedForward
-from predictors.nets.social_lstm import HEADS, MAX_PARAMETERS, gaussian_head
+from predictors.nets.social_lstm import HEADS, gaussian_head
 
 LABEL = "Social-Attention"
 # Widths may be 4096 as in nets.social_lstm.SIZE_BOUNDS (where the bounds are explained); 64 heads is more

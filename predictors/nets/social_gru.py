@@ -20,6 +20,7 @@ from typing import ClassVar
 import torch
 from torch import nn
 
+from predictors.net_size import MAX_PARAMETERS
 from predictors.nets.config_checks import (
     check_choice,
     check_int,
@@ -31,7 +32,7 @@ from predictors.nets.config_checks import (
 from predictors.nets.contract import Head
 from predictors.nets.pooling import POOLINGS, GridPooling, pooling_for
 from predictors.nets.rollout import TeacherForcedForward
-from predictors.nets.social_lstm import FLOAT_BOUNDS, HEADS, MAX_PARAMETERS, N_TAGS, gaussian_head
+from predictors.nets.social_lstm import FLOAT_BOUNDS, HEADS, N_TAGS, gaussian_head
 
 LABEL = "Social-GRU"
 # Social-LSTM's bounds (nets.social_lstm.SIZE_BOUNDS, where they are explained), without the noise.

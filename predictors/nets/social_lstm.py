@@ -24,6 +24,7 @@ import torch
 from torch import nn
 
 from predictors.errors import PredictorError, short_repr
+from predictors.net_size import MAX_PARAMETERS
 from predictors.nets.config_checks import config_from_dict, config_to_dict, wrong_type
 from predictors.nets.pooling import POOLINGS, GridPooling, pooling_for
 from predictors.nets.rollout import teacher_forced_rollout
@@ -35,8 +36,9 @@ N_TAGS = 2  # TrajNet++ InputEmbedding keeps two embedding slots for the encoder
 # hidden size of 4e6 asked torch for 256 TB. TrajNet++'s defaults are hidden 128, embedding 64, grid 12,
 # latent 16, pool 256 (0.8 M parameters); the shipped nets have 13 k to 16 k. Each width may be 4096
 # (32x TrajNet++'s hidden size), the grid 64 cells a side, and the whole net at most 10 M parameters (80 MB
-# in float64, the predictor's copy; 12x TrajNet++'s): far more than the MPC's CasADi twin can evaluate at
-# control rate, so no net that could be used is refused, and no file can make us allocate more.
+# in float64, the predictor's copy; 12x TrajNet++'s; net_size.MAX_PARAMETERS, every kind's bound): far more
+# than the MPC's CasADi twin can evaluate at control rate, so no net that could be used is refused, and no
+# file can make us allocate more.
 SIZE_BOUNDS: dict[str, tuple[int, int]] = {
     "hidden_dim": (1, 4096),
     "embedding_dim": (N_TAGS + 1, 4096),
@@ -48,7 +50,6 @@ SIZE_BOUNDS: dict[str, tuple[int, int]] = {
 # Upper bounds of the positive float settings: a cell of 100 m spans any scene; inputs scaled by more than
 # 1000 saturate every unit.
 FLOAT_BOUNDS: dict[str, float] = {"cell_side": 100.0, "input_scale": 1000.0}
-MAX_PARAMETERS = 10_000_000
 LABEL = "Social-LSTM"
 
 
