@@ -26,7 +26,7 @@ from crowdsim.conventions import (
 from crowdsim.errors import SimulationError, got, real_number
 from crowdsim.formations import FORMATIONS, Formation, check_spacing
 from crowdsim.orca import OrcaParams
-from crowdsim.replay import CROWDS, RECORDED_DT
+from crowdsim.replay import CROWDS
 from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment
 from crowdsim.world import (
     A_MAX,
@@ -38,6 +38,7 @@ from crowdsim.world import (
     MOST_TIME,
     OBS_LEN,
     RADIUS,
+    RECORDED_DT,
     V_MAX,
     V_PREF,
     WorldFacts,

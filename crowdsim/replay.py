@@ -42,6 +42,7 @@ import numpy as np
 
 from crowdsim.errors import SimulationError, counted
 from crowdsim.formations import Formation, robot_layout
+from crowdsim.world import RECORDED_DT
 
 # The BIWI EWAP sequences seq_eth and seq_hotel, whole or their last 20 % of frames alone: the TrajNet++ test
 # split, which no shipped net was trained or validated on (pipelines.loop.replay_data)
@@ -50,7 +51,6 @@ REPLAYED: Final[tuple[str, ...]] = ("eth", "hotel", "eth_test", "hotel_test")
 REACTIVE_SUFFIX: Final[str] = "_reactive"
 REACTIVE: Final[tuple[str, ...]] = tuple(name + REACTIVE_SUFFIX for name in REPLAYED)
 CROWDS: Final[tuple[str, ...]] = ("orca", *REPLAYED, *REACTIVE)  # EnvConfig.crowd
-RECORDED_DT: Final[float] = 0.4  # s, BIWI's annotation rate (2.5 fps), so the only tau a replay runs at
 START_CLEARANCE: Final[float] = 0.2  # m beyond 2 radius between a robot's start and a present pedestrian
 # s of the window in which an episode's people are chosen: twice the 10 s a robot at 1 m/s takes across,
 # so that they are about while the robots cross (an episode of the paper's 40 s limit ends in 14-21 s)

@@ -47,9 +47,20 @@ LEAST: Final[dict[str, tuple[float, str]]] = {
 }
 
 
+# The step of the recorded crowds, a fact of the data: BIWI EWAP's sequences are annotated at 2.5 fps (their
+# info.txt), TrajNet++ keeps that rate in every scene it cuts, and a replayed crowd plays it back row by row.
+# Here, the lowest layer, for the simulator's replays (crowdsim.replay, EnvConfig) and the predictors' data
+# (predictors.data: the scene files' "fps", the raw files' plausibility checks) alike; predictors.data's
+# modules would pull trajnetplusplustools into the replay path, and crowdsim imports no other package.
+RECORDED_DT: Final[float] = 0.4  # s
+RECORDED_FPS: Final[float] = 1 / RECORDED_DT  # 2.5, what a TrajNet++ scene's "fps" says
+
+
 @dataclass(frozen=True)
 class WorldFacts:
-    dt: float = 0.4  # s, tau: simulation step = control period (Table I; TrajNet++ samples at 2.5 Hz)
+    # s, tau: simulation step = control period (Table I's 0.4 s), the recorded step, so that predictors
+    # trained on TrajNet++ scenes step at the control period
+    dt: float = RECORDED_DT
     # L: observed steps every zoo predictor reads. TrajNet++ observes 9 steps; the paper's Table I says 8, but
     # our models are trained on 9, so the simulator keeps 9 rows of history and feeds them exactly that.
     obs_len: int = 9

@@ -26,6 +26,7 @@ import numpy as np
 from crowdsim.baselines import OrcaController
 from crowdsim.env import CrowdEnv
 from crowdsim.env_config import EnvConfig
+from crowdsim.world import RECORDED_DT, RECORDED_FPS
 from pipelines.errors import PipelineError
 
 FRAME_STEP: Final[int] = 10  # frame ids per 0.4 s step (BIWI hotel's numbering in TrajNet++)
@@ -65,16 +66,14 @@ def episode_tracks(
 
 def _check_request(episodes: int, n_humans: int, n_robots: int, seed: int, env_config: EnvConfig) -> None:
     """PipelineError, before any episode runs, for a request ``synthesize`` cannot write scenes for."""
-    from predictors.data.trajnet_scenes import TRAJNET_FPS
-
     for name, value, least in (("episodes", episodes, 1), ("n_humans", n_humans, 1), ("seed", seed, 0)):
         if isinstance(value, bool) or not isinstance(value, int) or value < least:
             raise PipelineError(f"{name} must be an int >= {least}, got {value!r}")
-    if not math.isclose(env_config.dt * TRAJNET_FPS, 1.0, rel_tol=1e-9):
+    if not math.isclose(env_config.dt * RECORDED_FPS, 1.0, rel_tol=1e-9):
         # the scenes are written at TrajNet++'s 2.5 fps, whatever the step: another dt made slower or faster
         # walkers out of the same frames (dt = 0.2 s wrote 1 m/s pedestrians as 0.4 m/s ones)
         raise PipelineError(
-            f"env_config.dt must be {1 / TRAJNET_FPS:g} s (TrajNet++ scenes are {TRAJNET_FPS:g} fps), "
+            f"env_config.dt must be {RECORDED_DT:g} s (TrajNet++ scenes are {RECORDED_FPS:g} fps), "
             f"got {env_config.dt:g} s"
         )
     if n_humans + n_robots < 2:  # refused after every episode had run, when no scene came out

@@ -15,10 +15,10 @@ from typing import Final
 
 import numpy as np
 
+from crowdsim.world import RECORDED_DT, RECORDED_FPS
 from predictors.errors import DatasetFormatError
 from predictors.text_table import counted
 
-STEP_SECONDS: Final[float] = 0.4  # 2.5 fps, what the converter writes into every scene
 # The estimate of a 0.4 s file lands within 1 % of it; a 10 Hz file gives 0.1 s, a 1 Hz one 1 s.
 STEP_RANGE: Final[tuple[float, float]] = (0.3, 0.5)
 # Below this speed |dp| / |v| is mostly rounding and annotation noise (standing people), not time.
@@ -65,8 +65,8 @@ def check_step_seconds(path: Path, rows: np.ndarray, frame_step: int) -> None:
             path,
             None,
             f"its velocity columns imply {seconds:.3f} s per annotated step ({1 / seconds:.3g} fps, "
-            f"median over {tracks} tracks), but `data prepare` converts BIWI's 2.5 fps annotations "
-            f"({STEP_SECONDS} s a step); resample the file to 2.5 fps first",
+            f"median over {tracks} tracks), but `data prepare` converts BIWI's {RECORDED_FPS:g} fps "
+            f"annotations ({RECORDED_DT} s a step); resample the file to {RECORDED_FPS:g} fps first",
         )
 
 
@@ -75,7 +75,7 @@ def fast_steps_note(path: Path, rows: np.ndarray, frame_step: int) -> str | None
     allows in the time between them (``frame_step`` frames a 0.4 s step): a reused id or a tracker jump,
     which a scene keeps as a leap of its primary. None when there is none. Frames as the file numbers them."""
     a, b = _consecutive(rows)
-    seconds = (rows[b, 0] - rows[a, 0]) / frame_step * STEP_SECONDS
+    seconds = (rows[b, 0] - rows[a, 0]) / frame_step * RECORDED_DT
     metres = np.hypot(rows[b, 2] - rows[a, 2], rows[b, 3] - rows[a, 3])
     fast = np.flatnonzero(metres > MAX_SPEED * seconds)
     if not fast.size:

@@ -41,6 +41,7 @@ from trajnetplusplustools import metrics as tt_metrics
 from trajnetplusplustools.interactions import check_interaction, get_interaction_type, group
 from trajnetplusplustools.writers import trajnet
 
+from crowdsim.world import RECORDED_FPS
 from predictors.base import OBS_LEN, PRED_LEN
 from predictors.data.validate import rows_by_pedestrian
 from predictors.durable import replace_durably
@@ -54,7 +55,6 @@ MIN_LENGTH: Final[float] = 0.0  # convert.py --min_length default (compared with
 GAP_TOLERANCE: Final[float] = 1.5  # scene.py continuous_frames
 ACTIVITY_FACTOR: Final[float] = 2.0  # scene.py: rows in the scene's frames >= 2 x chunk_size
 PROXIMITY_CELL: Final[float] = 10.0  # m; scene.py close_pedestrians cell_size
-TRAJNET_FPS: Final[float] = 2.5  # EWAP info.txt: annotated at 2.5 fps
 # Categorisation thresholds (convert.py "categorizers" defaults).
 STATIC_THRESHOLD: Final[float] = 1.0  # m, type I
 LINEAR_THRESHOLD: Final[float] = 0.5  # m, type II (Kalman final-position error)
@@ -81,7 +81,7 @@ class SceneSpec:
     primary: int
     start_frame: int
     end_frame: int
-    fps: float = TRAJNET_FPS
+    fps: float = RECORDED_FPS
     tag: Tag = 0  # (type 1-4, interaction sub-types) when categorised, else 0
 
     def json_tag(self) -> object:
@@ -228,7 +228,7 @@ def build_scenes(
     chunk_size: int = CHUNK_SIZE,
     chunk_stride: int = CHUNK_STRIDE,
     start_scene_id: int = 0,
-    fps: float = TRAJNET_FPS,
+    fps: float = RECORDED_FPS,
     obs_len: int = OBS_LEN,
     min_length: float = MIN_LENGTH,
     categorize_scenes: bool = True,
@@ -310,7 +310,7 @@ def scene_track_rows(scenes: Sequence[SceneSpec], tracks: np.ndarray) -> np.ndar
 
 
 def write_ndjson(
-    path: str | Path, scenes: Sequence[SceneSpec], tracks: np.ndarray, fps: float = TRAJNET_FPS
+    path: str | Path, scenes: Sequence[SceneSpec], tracks: np.ndarray, fps: float = RECORDED_FPS
 ) -> np.ndarray:
     """Write a TrajNet++ ndjson file: the scene records, then the track rows they need (see module doc).
     Returns the indices into ``tracks`` of the rows written (a row no scene needs is not)."""
