@@ -23,6 +23,7 @@ if TYPE_CHECKING:
     from pipelines.loop.controllers import ControllerReads
     from pipelines.loop.margins import InForce
     from pipelines.loop.margins_read import Planned
+    from predictors.calibration_store import ModelKind
 
 
 # by method label: its block, None where its margins need none; a label not there: the worker looks it up
@@ -42,12 +43,16 @@ def checked_blocks(planned: Mapping[str, Planned]) -> dict[str, CheckedBlock | N
 
 
 def zoo_calibrations(
-    tasks: Iterable[EpisodeTask], weights: Mapping[str, str | None], blocks: Callable[[], InForce]
+    tasks: Iterable[EpisodeTask],
+    weights: Mapping[str, str | None],
+    blocks: Callable[[], InForce],
+    kinds: Mapping[str, ModelKind],
 ) -> dict[str, CheckedBlock | None]:
     """Each method of ``tasks`` with its block as a library sweep (``run_sweep`` without ``calibrations``)
     hands it, looked up as its controller would (behind its world's sensor, at its horizon, for the weights
     ``weights`` names) in the blocks in force ``blocks`` (``margins_read.read_once``'s): by method label,
-    a lookup that refuses left out, for its worker to refuse."""
+    a lookup that refuses left out, for its worker to refuse. ``kinds``: each predictor's model kind as the
+    caller located its entry, for the calibrate command a refusal quotes (a name not there: located then)."""
     from pipelines.loop.margins import CALIBRATED_MODES
     from pipelines.loop.margins_read import Refused, look_up
     from pipelines.loop.mpc_setup import mpc_config
@@ -65,7 +70,8 @@ def zoo_calibrations(
             continue
         name = spec.predictor_name
         horizon = mpc_config(spec, world=cell.world.env_config().world()).horizon
-        at = look_up(spec.margins, name, horizon, None if name is None else weights.get(name), blocks=blocks)
+        sha256, kind = (None, ...) if name is None else (weights.get(name), kinds.get(name, ...))
+        at = look_up(spec.margins, name, horizon, sha256, kind, blocks=blocks)
         if at is not None and not isinstance(at, Refused):
             found[cell.method] = CheckedBlock.of(at)
     return found
@@ -106,10 +112,16 @@ def checked_inputs(
 ) -> CheckedInputs:
     """``run_sweep``'s ``weights`` and ``calibrations``, those not given read as the run starts: the
     manifests' weights (``zoo_weights``), and each method's block for them from one read of the
-    calibrations (``zoo_calibrations``)."""
-    from pipelines.experiments.checked_weights import zoo_weights
+    calibrations (``zoo_calibrations``). The entries located for the weights give the model kinds a refused
+    lookup's calibrate command names: located again there, a refusal read the manifest once more a method."""
+    from pipelines.experiments.checked_weights import zoo_located, zoo_weights
     from pipelines.loop.margins_read import read_once
 
-    weights = zoo_weights(tasks) if weights is None else weights
-    blocks = zoo_calibrations(tasks, weights, read_once()) if calibrations is None else calibrations
-    return CheckedInputs(weights, blocks)
+    kinds: dict[str, ModelKind] = {}  # given weights: the caller located the entries, a refusal locates them
+    if weights is None:
+        located = zoo_located(tasks)
+        weights = zoo_weights(located)
+        kinds = {name: None if found is None else found.entry.model for name, found in located.items()}
+    if calibrations is None:
+        calibrations = zoo_calibrations(tasks, weights, read_once(), kinds)
+    return CheckedInputs(weights, calibrations)

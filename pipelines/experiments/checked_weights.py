@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Iterable, Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pipelines.errors import PipelineError
 from pipelines.experiments.tasks import EpisodeTask
@@ -22,20 +23,28 @@ from pipelines.loop.contract import checked_description
 from pipelines.loop.controllers import Controller
 from predictors.text_table import counted
 
+if TYPE_CHECKING:
+    from predictors.zoo import Located
+
 
 class WeightsReplaced(PipelineError):
     """A worker's controller loaded other weights than the sweep's driver checked: no episode error (a rerun
     with those weights is refused, pipelines.experiments.resume_checks), but the end of the sweep."""
 
 
-def zoo_weights(tasks: Iterable[EpisodeTask]) -> dict[str, str]:
-    """The sha256 of the weights of each zoo predictor ``tasks`` plan with, as the zoo's manifests name them
-    now: the weights a library sweep (``run_sweep`` without ``weights``) checks its workers against, as its
-    resume checks its records against them."""
+def zoo_located(tasks: Iterable[EpisodeTask]) -> dict[str, Located | None]:
+    """The zoo entry of each predictor ``tasks`` plan with, as the zoo's manifests name it now (None: no
+    entry, a predictor without weights)."""
     from predictors import zoo
 
     names = sorted({n for t in tasks if (n := t.cell.spec.predictor_name) is not None})
-    located = {name: zoo.locate(name) for name in names}
+    return {name: zoo.locate(name) for name in names}
+
+
+def zoo_weights(located: Mapping[str, Located | None]) -> dict[str, str]:
+    """The sha256 of the weights of each entry ``zoo_located`` found: the weights a library sweep
+    (``run_sweep`` without ``weights``) checks its workers against, as its resume checks its records
+    against them."""
     return {name: found.entry.sha256 for name, found in located.items() if found is not None}
 
 

@@ -232,3 +232,42 @@ def test_a_plugins_lookup_of_other_margins_is_handed_nothing(tmp_path):
         assert spec.margins.located("constant_velocity", 4, None) == read
         path, block = MarginSpec("conformal", alpha=0.2).located("constant_velocity", 4, None)
     assert path == checkpoints_dir() / "calibrations.json" and block.alpha == 0.2
+
+
+def test_a_library_sweeps_refused_lookup_reads_the_manifest_once(tmp_path, monkeypatch):
+    """``run_sweep`` without ``calibrations`` looks each method's block up as it starts, from the entries it
+    located for the weights; a lookup that refused located its predictor's entry again, only to name the
+    model in the calibrate command its refusal quotes: the coupling experiment (three methods of one
+    predictor) at an alpha no block has read the manifest four times before any worker started."""
+    from pipelines.experiments.cells import get_experiment
+    from pipelines.experiments.sweep import run_sweep
+    from pipelines.experiments.sweep_config import SweepConfig
+    from pipelines.loop.margins import MarginSpec
+    from predictors import zoo
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(tmp_path / "zoo"))
+    real, reads = zoo.read_manifest, []
+
+    def reading(*args, **kwargs):
+        reads.append(args)
+        return real(*args, **kwargs)
+
+    handed = []
+
+    class NoEpisodes:  # what the workers would be handed, and no episode run
+        name = "none"
+
+        def run(self, tasks):
+            handed.extend(tasks)
+            return iter(())
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(zoo, "read_manifest", reading)
+    experiment = get_experiment("coupling").with_margins(MarginSpec("conformal", alpha=0.37))
+    config = SweepConfig(experiment, tmp_path / "sweep", 1, humans=(5,), backend="inline", progress=False)
+    run_sweep(config, backend_factory=lambda config, scratch: NoEpisodes())
+    assert len({task.cell.method for task in handed}) == 3
+    assert all(task.calibration is ... for task in handed)  # refused: each worker refuses it itself
+    assert len(reads) == 1
