@@ -32,7 +32,7 @@ from predictors.nets.config_checks import (
 from predictors.nets.contract import Head
 from predictors.nets.pooling import POOLINGS, GridPooling, pooling_for
 from predictors.nets.rollout import TeacherForcedForward
-from predictors.nets.social_lstm import FLOAT_BOUNDS, HEADS, N_TAGS, gaussian_head
+from predictors.nets.social_lstm import FLOAT_BOUNDS, HEADS, N_TAGS, gaussian_head, pooled_rnn_parameter_count
 
 LABEL = "Social-GRU"
 # Social-LSTM's bounds (nets.social_lstm.SIZE_BOUNDS, where they are explained), without the noise.
@@ -76,21 +76,7 @@ class SocialGRUConfig:
 
     def parameter_count(self) -> int:
         """The number of parameters ``SocialGRU(self)`` has, computed without allocating them."""
-
-        def linear(n_in: int, n_out: int) -> int:
-            return n_in * n_out + n_out
-
-        count = 0
-        pooled = 0
-        if self.pooling != "none":
-            count += linear(self.hidden_dim, self.latent_dim)
-            count += linear(self.grid_size**2 * self.latent_dim, self.pool_dim)
-            pooled = self.pool_dim
-        count += linear(2 + pooled, self.embedding_dim - N_TAGS)
-        # encoder and decoder GRUCells: weight_ih, weight_hh and two biases, 3 gates each
-        count += 2 * 3 * self.hidden_dim * (self.embedding_dim + self.hidden_dim + 2)
-        count += linear(self.hidden_dim, 5 if self.head == "gaussian" else 2)
-        return count
+        return pooled_rnn_parameter_count(self, gates=3)
 
     def to_dict(self) -> dict:
         return config_to_dict(self)

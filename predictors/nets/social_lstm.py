@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass
+from typing import Protocol
 
 import torch
 from torch import nn
@@ -106,22 +107,8 @@ class SocialLSTMConfig:
 
     def parameter_count(self) -> int:
         """The number of parameters ``SocialLSTM(self)`` has, computed without allocating them."""
-
-        def linear(n_in: int, n_out: int, bias: bool = True) -> int:
-            return n_in * n_out + (n_out if bias else 0)
-
-        pooled = 0
-        count = 0
-        if self.pooling != "none":
-            count += linear(self.hidden_dim, self.latent_dim)
-            count += linear(self.grid_size**2 * self.latent_dim, self.pool_dim)
-            pooled = self.pool_dim
-        count += linear(2 + pooled, self.embedding_dim - N_TAGS)
-        # encoder and decoder LSTMCells: weight_ih, weight_hh and two biases, 4 gates each
-        count += 2 * 4 * self.hidden_dim * (self.embedding_dim + self.hidden_dim + 2)
-        count += linear(self.hidden_dim, 5 if self.head == "gaussian" else 2)
-        count += linear(self.noise_dim, self.hidden_dim, bias=False) if self.noise_dim else 0
-        return count
+        noise = self.noise_dim * self.hidden_dim  # the generator's noise projection, no bias
+        return pooled_rnn_parameter_count(self, gates=4) + noise
 
     def to_dict(self) -> dict:
         return config_to_dict(self)
@@ -129,6 +116,45 @@ class SocialLSTMConfig:
     @classmethod
     def from_dict(cls, values: dict) -> SocialLSTMConfig:
         return config_from_dict(cls, values, LABEL)
+
+
+class PooledRNNSizes(Protocol):
+    """The sizes of a net laid out as Social-LSTM (``SocialLSTMConfig``, ``nets.social_gru``'s config)."""
+
+    @property
+    def pooling(self) -> str: ...
+    @property
+    def hidden_dim(self) -> int: ...
+    @property
+    def embedding_dim(self) -> int: ...
+    @property
+    def grid_size(self) -> int: ...
+    @property
+    def latent_dim(self) -> int: ...
+    @property
+    def pool_dim(self) -> int: ...
+    @property
+    def head(self) -> str: ...
+
+
+def pooled_rnn_parameter_count(sizes: PooledRNNSizes, gates: int) -> int:
+    """The parameters of Social-LSTM's layout with recurrent cells of ``gates`` gates (LSTM 4, GRU 3): the
+    pooling, the input embedding, the encoder and decoder cells and the head (a GAN generator's noise
+    projection not included), counted without allocating them."""
+
+    def linear(n_in: int, n_out: int) -> int:
+        return n_in * n_out + n_out
+
+    count = 0
+    pooled = 0
+    if sizes.pooling != "none":
+        count += linear(sizes.hidden_dim, sizes.latent_dim)
+        count += linear(sizes.grid_size**2 * sizes.latent_dim, sizes.pool_dim)
+        pooled = sizes.pool_dim
+    count += linear(2 + pooled, sizes.embedding_dim - N_TAGS)
+    # encoder and decoder cells: weight_ih, weight_hh and two biases, for each gate
+    count += 2 * gates * sizes.hidden_dim * (sizes.embedding_dim + sizes.hidden_dim + 2)
+    return count + linear(sizes.hidden_dim, 5 if sizes.head == "gaussian" else 2)
 
 
 def gaussian_head(raw: torch.Tensor) -> torch.Tensor:

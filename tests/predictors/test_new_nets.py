@@ -11,6 +11,7 @@ from predictors.errors import PredictorError
 from predictors.export import TensorSpec, export_function
 from predictors.nets.contract import StepNet
 from predictors.nets.losses import gaussian_nll, l2_loss
+from predictors.nets.pooling import POOLINGS
 from predictors.nets.rollout import teacher_forced_rollout
 from predictors.nets.social_attention import (
     NeighbourAttention,
@@ -19,7 +20,7 @@ from predictors.nets.social_attention import (
     self_mask,
 )
 from predictors.nets.social_gru import SocialGRU, SocialGRUConfig, tag_input
-from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+from predictors.nets.social_lstm import HEADS, SocialLSTM, SocialLSTMConfig, pooled_rnn_parameter_count
 from tests.predictors.test_nets import walking_batch
 
 NETS = {
@@ -254,6 +255,22 @@ def test_default_parameter_counts_are_computed_without_allocating():
     assert SocialGRUConfig().parameter_count() == 12_483
     assert SocialAttentionConfig().parameter_count() == 19_909
     assert SocialGRUConfig(pooling="none").parameter_count() < SocialGRUConfig().parameter_count()
+
+
+@pytest.mark.parametrize("pooling", POOLINGS)
+@pytest.mark.parametrize("head", HEADS)
+def test_social_lstm_and_gru_count_their_layout_once(pooling, head):
+    """Both configs count Social-LSTM's layout with one function, the cells' gates apart (the Social-GRU had
+    a copy of the Social-LSTM's count with 3 for 4): each variant's count is its net's."""
+    gru = SocialGRUConfig(pooling=pooling, head=head)
+    assert pooled_rnn_parameter_count(gru, gates=3) == gru.parameter_count()
+    assert gru.parameter_count() == sum(p.numel() for p in SocialGRU(gru).parameters())
+    for noise_dim in (0, 3):
+        lstm = SocialLSTMConfig(pooling=pooling, head=head, noise_dim=noise_dim)
+        assert (
+            pooled_rnn_parameter_count(lstm, gates=4) + noise_dim * lstm.hidden_dim == lstm.parameter_count()
+        )
+        assert lstm.parameter_count() == sum(p.numel() for p in SocialLSTM(lstm).parameters())
 
 
 @pytest.mark.parametrize(
