@@ -10,7 +10,13 @@ from typing import TYPE_CHECKING, Final
 
 from pipelines.commands import check_data_files, check_writable, path_arg, write_output
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
-from pipelines.commands.train_data import DATASET_SUFFIX, DEFAULT_DATASET, DEFAULT_PROTOCOL, PROTOCOLS
+from pipelines.commands.train_data import (
+    DEFAULT_DATASET,
+    DEFAULT_PROTOCOL,
+    PROTOCOLS,
+    data_dir_option,
+    dataset_option,
+)
 from pipelines.errors import PipelineError, print_note
 from pipelines.plain_json import plain
 
@@ -94,16 +100,9 @@ def register(subparsers) -> None:
         help="registered predictor or model-zoo name (shipped or user zoo; a plugin's model needs "
         "crowdmpc --plugin module:NetClass evaluate ...)",
     )
-    parser.add_argument(
-        "--data-dir", type=path_arg, default=None, help="data directory (default: $CROWDMPC_DATA)"
-    )
     # defaults filled in by _choose_files: None tells an option typed from its default, which --test refuses
-    parser.add_argument(
-        "--dataset",
-        default=None,
-        choices=tuple(DATASET_SUFFIX),
-        help=f"test sequence (default {DEFAULT_DATASET})",
-    )
+    data_dir_option(parser)
+    dataset_option(parser)
     parser.add_argument(
         "--split", default=None, choices=("train", "val", "test"), help="split to score (default test)"
     )

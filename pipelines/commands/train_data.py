@@ -22,24 +22,35 @@ PROTOCOLS: Final[tuple[str, ...]] = ("paper", "loo")
 _OPTIONS: Final[tuple[str, ...]] = ("data_dir", "protocol", "dataset", "train", "val", "test")
 
 
-def data_options(parser: argparse.ArgumentParser) -> None:
-    """Which scenes: prepared files by protocol and dataset, or explicit files."""
-    # None by default, here and below: given with explicit --train/--val files, they are refused
+def data_dir_option(parser: argparse.ArgumentParser) -> None:
+    """--data-dir, where the prepared files are (train, evaluate): None by default, so that one typed with
+    explicit files is told from $CROWDMPC_DATA and refused."""
     parser.add_argument(
         "--data-dir", type=path_arg, default=None, help="data directory (default: $CROWDMPC_DATA)"
     )
-    parser.add_argument(
-        "--protocol",
-        default=None,
-        choices=PROTOCOLS,
-        help=f"train/val/test files (default {DEFAULT_PROTOCOL})",
-    )
+
+
+def dataset_option(parser: argparse.ArgumentParser) -> None:
+    """--dataset, the protocol's test sequence (train, evaluate): None by default, as --data-dir."""
     parser.add_argument(
         "--dataset",
         default=None,
         choices=tuple(DATASET_SUFFIX),
         help=f"test sequence (default {DEFAULT_DATASET})",
     )
+
+
+def data_options(parser: argparse.ArgumentParser) -> None:
+    """Which scenes: prepared files by protocol and dataset, or explicit files."""
+    # None by default, here and below: given with explicit --train/--val files, they are refused
+    data_dir_option(parser)
+    parser.add_argument(
+        "--protocol",
+        default=None,
+        choices=PROTOCOLS,
+        help=f"train/val/test files (default {DEFAULT_PROTOCOL})",
+    )
+    dataset_option(parser)
     parser.add_argument(
         "--train",
         nargs="+",

@@ -91,3 +91,24 @@ def test_the_episodes_per_cell_help_says_which_crossing_each_episode_is():
     for text in [*helps, note]:
         assert "half of each scenario" not in text
         assert "circle and perpendicular crossings in turn, the circle first" in text
+
+
+def test_train_and_evaluate_choose_the_prepared_files_with_one_data_dir_and_dataset():
+    """`train` and `evaluate` each wrote --data-dir and --dataset out (duplicates D4): both take
+    train_data's ``data_dir_option`` and ``dataset_option``, so their help and choices cannot drift apart."""
+    from pipelines.commands import train_data
+
+    def described(actions) -> dict:
+        return {
+            a.dest: (a.option_strings, a.type, a.default, a.choices, a.help)
+            for a in actions
+            if a.dest in ("data_dir", "dataset")
+        }
+
+    expected = argparse.ArgumentParser()
+    train_data.data_dir_option(expected)
+    train_data.dataset_option(expected)
+    assert len(described(expected._actions)) == 2
+    for command in ("train", "evaluate"):
+        actions = [action for path, action in _options() if path == (command,)]
+        assert described(actions) == described(expected._actions), command
