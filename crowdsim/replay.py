@@ -41,7 +41,7 @@ from typing import Final
 import numpy as np
 
 from crowdsim.errors import SimulationError, counted
-from crowdsim.formations import Formation, robot_layout
+from crowdsim.formations import Formation, check_robot_spacing, robot_layout
 from crowdsim.world import RECORDED_DT
 
 # The BIWI EWAP sequences seq_eth and seq_hotel, whole or their last 20 % of frames alone: the TrajNet++ test
@@ -203,6 +203,8 @@ def replay_episode(
     if crowd is not None and crowd != recording.name:
         named = f"crowd {crowd!r} (recording {recording.name!r})"
     robot_starts, robot_goals = robot_layout(n_robots, formation, spacing=spacing)
+    # as make_layout's ORCA crowds: at radius 0.55 m a replay's row of robots, 1 m apart, ran in contact
+    check_robot_spacing(robot_starts, radius, formation, n_robots)
     turned = recording.turned(scenario)
     starts = recording.window_starts(past + steps)
     if len(starts) == 0:

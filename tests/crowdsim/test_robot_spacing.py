@@ -80,3 +80,22 @@ def test_a_replayed_crowd_takes_the_spacing_too():
     rng = np.random.default_rng(0)
     ep = replay_episode(four_people(), "circle", 3, 3, 10, rng, radius=0.3, past=2, spacing=1.4)
     np.testing.assert_allclose(ep.robot_starts, robot_layout(3, "auto", spacing=1.4)[0], rtol=0, atol=0)
+
+
+def test_a_replayed_crowd_refuses_a_radius_at_which_the_robots_overlap_as_orcas_does():
+    """make_layout refused radius 0.55 m for the row's robots 1 m apart; a replay drew its robots from the
+    same formation without the check, and ``--crowd eth_test --set world.radius=0.55`` ran the robots
+    inside each other from the start."""
+    from crowdsim.replay import replay_episode
+    from tests.crowdsim.test_replay import four_people
+
+    refusal = r"the row formation of 3 robots puts neighbours 1 m apart, in contact from the start"
+    with pytest.raises(SimulationError, match=refusal):
+        replay_episode(four_people(), "circle", 3, 3, 10, np.random.default_rng(0), radius=0.55, past=2)
+    short = {"crowd": "eth", "radius": 0.55, "time_limit": 4.0, "timeout_margin": 0.0, "history_len": 3}
+    env = CrowdEnv(EnvConfig(**short), four_people())  # 10 steps after 2 rows of history: its 13 rows
+    with pytest.raises(SimulationError, match=refusal):
+        env.reset(0, "circle", 3, 3)
+    # a spacing that keeps them apart, or one robot, runs
+    CrowdEnv(EnvConfig(**short, robot_spacing=1.2), four_people()).reset(0, "circle", 3, 3)
+    env.reset(0, "circle", 3, 1)
