@@ -86,16 +86,33 @@ def warn_formation(config: EnvConfig, n_robots: int) -> None:
 
 def numbers(action: object, what: str) -> np.ndarray:
     """``action`` as a float array; SimulationError naming ``what`` when it holds no numbers (numpy's own
-    "could not convert string to float" named nothing)."""
+    "could not convert string to float" named nothing), or texts or booleans, which ``astype(float)`` read
+    as numbers ("0.5" as 0.5, True as 1.0) where ``CrowdEnv.step`` refuses them."""
     try:
         raw = np.asarray(action)
-        if not np.iscomplexobj(raw):  # numpy drops an imaginary part with a ComplexWarning only
-            return raw.astype(float)
+        values = None if np.iscomplexobj(raw) else raw.astype(float)  # numpy drops an imaginary part
     except (TypeError, ValueError) as exc:
         raise SimulationError(
             f"{what} must be an array of numbers, got {type(action).__name__} ({exc})"
         ) from None
-    raise SimulationError(f"{what} must be an array of real numbers, got complex ones")
+    if values is None:
+        raise SimulationError(f"{what} must be an array of real numbers, got complex ones")
+    if raw.dtype.kind in "bSU" or (raw.dtype == object and any(map(_not_a_number, raw.flat))):
+        raise SimulationError(f"{what} must be an array of real numbers, got one of {_kind(raw)}")
+    return values
+
+
+def _not_a_number(item: object) -> bool:
+    """A text or a boolean in an object array, which ``float()`` takes as a number."""
+    return isinstance(item, str | bytes | bool | np.bool_)
+
+
+def _kind(raw: np.ndarray) -> str:
+    """What a refused array holds: its dtype ("bool", "<U3"), or an object array's first item that is no
+    number ("str")."""
+    if raw.dtype != object:
+        return str(raw.dtype)
+    return type(next(item for item in raw.flat if _not_a_number(item))).__name__
 
 
 def count(value: object, name: str, low: int, high: int) -> int:

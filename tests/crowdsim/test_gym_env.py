@@ -517,6 +517,31 @@ def test_an_action_of_no_numbers_is_one_line_naming_it():
         env.step(np.array([[1j, 1j]]))
 
 
+@pytest.mark.parametrize(
+    ("given", "held"),
+    [
+        (np.full((1, 2), "0.5"), "<U3"),
+        (np.ones((1, 2), dtype=bool), "bool"),
+        (np.array([[0.5, True]], dtype=object), "bool"),
+        (np.array([[0.5, "1"]], dtype=object), "str"),
+    ],
+)
+def test_an_action_of_texts_or_booleans_is_refused_as_the_simulator_refuses_it(given, held):
+    """numbers() took "0.5" as 0.5 and True as 1.0, so the environment drove robots with what CrowdEnv.step
+    refuses ("robot_accelerations must be a (1, 2) array of real numbers, got one of bool")."""
+    refusal = rf"action must be an array of real numbers, got one of {held}$"
+    env = CrowdNavEnv(n_robots=1, n_humans=1)
+    env.reset(seed=0)
+    with pytest.raises(SimulationError, match=f"^{refusal}"):
+        env.step(given)
+    velocity = VelocityControl(CrowdNavEnv(n_robots=1, n_humans=1))
+    velocity.reset(seed=0)
+    with pytest.raises(SimulationError, match=f"^velocity {refusal}"):
+        velocity.step(given)
+    env.step(np.array([[1, 0]]))  # integers are numbers, and the episode goes on
+    env.step(np.array([[0.5, 1]], dtype=object))
+
+
 def test_render_draws_an_rgb_frame():
     env = CrowdNavEnv(n_humans=3, render_mode="rgb_array")
     with pytest.raises(SimulationError, match="before reset"):
