@@ -52,6 +52,19 @@ def _holds_bool(value: object) -> bool:
     return isinstance(value, bool | np.bool_)
 
 
+def texts_or_bools(raw: np.ndarray) -> str | None:
+    """What ``raw`` holds in place of numbers that numpy's float conversion reads as numbers ("3" as 3.0,
+    True as 1.0): its dtype for an array of texts or booleans ("<U3", "bool"), the type of an object array's
+    first text or boolean ("str"); None when it holds none."""
+    if raw.dtype.kind in "bSU":
+        return str(raw.dtype)
+    if raw.dtype == object:
+        for item in raw.flat:
+            if isinstance(item, str | bytes | bool | np.bool_):
+                return type(item).__name__
+    return None
+
+
 class LayoutWarning(UserWarning):
     """A layout the simulator runs but that starts agents in contact (``CrowdEnv.reset_layout``)."""
 

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 
-from crowdsim.errors import LayoutWarning, SimulationError
+from crowdsim.errors import LayoutWarning, SimulationError, texts_or_bools
 from crowdsim.formations import check_robot_spacing, robot_layout
 from crowdsim.scenarios import Layout, check_sizes, checked_layout
 
@@ -97,22 +97,10 @@ def numbers(action: object, what: str) -> np.ndarray:
         ) from None
     if values is None:
         raise SimulationError(f"{what} must be an array of real numbers, got complex ones")
-    if raw.dtype.kind in "bSU" or (raw.dtype == object and any(map(_not_a_number, raw.flat))):
-        raise SimulationError(f"{what} must be an array of real numbers, got one of {_kind(raw)}")
+    held = texts_or_bools(raw)
+    if held is not None:
+        raise SimulationError(f"{what} must be an array of real numbers, got one of {held}")
     return values
-
-
-def _not_a_number(item: object) -> bool:
-    """A text or a boolean in an object array, which ``float()`` takes as a number."""
-    return isinstance(item, str | bytes | bool | np.bool_)
-
-
-def _kind(raw: np.ndarray) -> str:
-    """What a refused array holds: its dtype ("bool", "<U3"), or an object array's first item that is no
-    number ("str")."""
-    if raw.dtype != object:
-        return str(raw.dtype)
-    return type(next(item for item in raw.flat if _not_a_number(item))).__name__
 
 
 def count(value: object, name: str, low: int, high: int) -> int:

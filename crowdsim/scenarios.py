@@ -53,7 +53,7 @@ import numpy as np
 
 from crowdsim.conventions import CROSSINGS, SPAWN_SEPARATION
 from crowdsim.crossings import PLACERS
-from crowdsim.errors import SimulationError, counted, real_number
+from crowdsim.errors import SimulationError, counted, real_number, texts_or_bools
 from crowdsim.formations import FORMATIONS as FORMATIONS
 from crowdsim.formations import Formation as Formation
 from crowdsim.formations import check_robot_spacing
@@ -105,6 +105,9 @@ def checked_layout(layout: Layout) -> Layout:
             points = np.array(raw, dtype=float)
         except (TypeError, ValueError) as exc:
             raise SimulationError(f"layout.{name} must be a ({rows}, 2) array of numbers: {exc}") from None
+        held = texts_or_bools(raw)
+        if held is not None:  # converted, "3" was a start at 3 m and True one at 1 m
+            raise SimulationError(f"layout.{name} must hold real numbers, got {held} values")
         if points.shape == (0,):  # [] or np.array([]): no agents
             points = points.reshape(0, 2)
         if points.ndim != 2 or points.shape[1] != 2:

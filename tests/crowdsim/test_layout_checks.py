@@ -88,6 +88,28 @@ def test_wrong_shapes_and_types_are_refused_by_field():
         CrowdEnv().reset_layout({"robot_starts": good.robot_starts})  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize(
+    ("starts", "held"),
+    [
+        ([["3", "0"]], "<U1"),
+        (np.array([[True, False]]), "bool"),
+        (np.array([[3.0, "0"]], dtype=object), "str"),
+        (np.array([[3.0, np.True_]], dtype=object), "bool"),
+    ],
+)
+def test_texts_and_booleans_are_no_coordinates(starts, held):
+    """The float conversion read "3" as a human at 3 m and True as one at 1 m, where CrowdEnv.step refuses
+    such accelerations; the gym env's options["layout"] takes the same check."""
+    from crowdsim.gym_env import CrowdNavEnv
+
+    layout = Layout([[0.0, 0.0]], [[0.0, 5.0]], starts, [[3.0, 0.0]])  # type: ignore[arg-type]
+    refusal = f"layout.human_starts must hold real numbers, got {held} values"
+    with pytest.raises(SimulationError, match=refusal):
+        CrowdEnv().reset_layout(layout)
+    with pytest.raises(SimulationError, match=refusal):
+        CrowdNavEnv(n_robots=1, n_humans=1).reset(seed=0, options={"layout": layout})
+
+
 def test_lists_are_taken_as_arrays():
     layout = Layout([[0.0, 0.0]], [[0.0, 5.0]], [[3, 0]], [[3, 0]])  # type: ignore[arg-type]
     obs = CrowdEnv().reset_layout(layout)
