@@ -208,9 +208,14 @@ def replay_episode(
     turned = recording.turned(scenario)
     starts = recording.window_starts(past + steps)
     if len(starts) == 0:
+        # "shorten [env] time_limit" was the advice where the history alone left no room for a step
+        fits = len(recording.window_starts(past + 1)) > 0
+        advice = (
+            "shorten [env] time_limit" if fits else "shorten [world] obs_len: the history alone does not fit"
+        )
         raise SimulationError(
             f"{named} has no {past + steps + 1} consecutive steps (an episode of "
-            f"{steps * recording.dt:g} s after {past} of observed history): shorten [env] time_limit"
+            f"{steps * recording.dt:g} s after {past} of observed history): {advice}"
         )
     corridor = np.concatenate([robot_starts, robot_goals]) if n_robots else np.zeros((1, 2))
     low, high = corridor.min(axis=0), corridor.max(axis=0)

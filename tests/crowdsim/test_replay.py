@@ -185,6 +185,22 @@ def test_an_episode_nobody_can_make_is_refused_with_the_most_found():
         replay_episode(rec, "perpendicular", 1, 3, 10, np.random.default_rng(0), radius=0.3, past=2)
 
 
+def test_a_history_too_long_for_the_recording_is_said_to_be_the_history_not_the_time_limit():
+    """four_people's 13 rows: 10 steps after 2 rows of history do not fit but 1 step does (shorten the time
+    limit); after 12 rows of history not even 1 step fits, where the refusal still said "shorten [env]
+    time_limit" of an episode of 0.4 s."""
+    rng = np.random.default_rng(0)
+    with pytest.raises(SimulationError, match=r"no 14 consecutive steps .*: shorten \[env\] time_limit$"):
+        replay_episode(four_people(), "circle", 2, 3, 11, rng, radius=0.3, past=2)
+    with pytest.raises(
+        SimulationError,
+        match=r"no 14 consecutive steps \(an episode of 0.4 s after 12 of observed history\): shorten "
+        r"\[world\] obs_len: the history alone does not fit$",
+    ):
+        replay_episode(four_people(), "circle", 2, 3, 1, rng, radius=0.3, past=12)
+    replay_episode(four_people(), "circle", 2, 3, 1, rng, radius=0.3, past=11)  # 13 rows: it fits
+
+
 def test_the_simulator_plays_the_tracks_back_with_their_past_presence_and_track_lengths():
     # history_len 3: the 2 rows before the episode are its observed past; time limit 4 s = 10 steps
     config = EnvConfig(crowd="eth", history_len=3, time_limit=4.0, timeout_margin=0.0)
