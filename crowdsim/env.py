@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 
 from crowdsim.env_config import EnvConfig
-from crowdsim.errors import LayoutWarning, SimulationError
+from crowdsim.errors import LayoutWarning, SimulationError, got
 from crowdsim.human_motion import humans_next
 from crowdsim.metrics import Trajectory
 from crowdsim.observation import Observation
@@ -111,8 +111,8 @@ class CrowdEnv:
             # a row a step: a 10 Hz recording walked at a quarter of the speed its velocities said
             if not math.isclose(recording.dt, config.dt, rel_tol=1e-9):
                 raise SimulationError(
-                    f"recording {recording.name!r} has steps of {recording.dt:g} s, but dt is {config.dt:g} "
-                    "s: a replay plays one recorded step a simulation step"
+                    f"recording {recording.name!r} has steps of {got(recording.dt)} s, but dt is "
+                    f"{got(config.dt)} s: a replay plays one recorded step a simulation step"
                 )
         self.config = config
         self.recording = recording

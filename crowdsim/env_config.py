@@ -160,7 +160,7 @@ class EnvConfig:
         if self.crowd != "orca" and not math.isclose(self.dt, RECORDED_DT, rel_tol=1e-9):
             raise SimulationError(  # the tracks are played back row by row, at their own rate
                 f"EnvConfig.crowd {self.crowd!r} replays steps of {RECORDED_DT:g} s, so dt must be "
-                f"{RECORDED_DT:g} s, got {self.dt:g}"
+                f"{RECORDED_DT:g} s, got {got(self.dt)}"  # :g said "got 0.4" of 0.4000001
             )
         if not isinstance(self.robots_visible, bool | np.bool_):
             raise SimulationError(f"EnvConfig.robots_visible must be a bool, got {self.robots_visible!r}")

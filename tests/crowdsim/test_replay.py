@@ -247,6 +247,19 @@ def test_a_replayed_crowd_needs_its_recording_the_recorded_step_and_no_layout():
         env.reset(0, "square", 2, 3)
 
 
+def test_a_step_just_off_the_recordings_is_refused_in_full_not_rounded_onto_it():
+    """ ":g" wrote 0.4000001 as 0.4, so that the refusals read "dt must be 0.4 s, got 0.4" and "has steps of
+    0.4 s, but dt is 0.4 s" (``crowdmpc simulate --crowd eth_test --set world.dt=0.4000001``; a recording's
+    dt of np.float32(0.4))."""
+    with pytest.raises(SimulationError, match=r"so dt must be 0.4 s, got 0.4000001$"):
+        EnvConfig(crowd="eth", dt=0.4000001)
+    with pytest.raises(SimulationError, match=r"got 0.4000000059604645$"):
+        EnvConfig(crowd="eth", dt=np.float32(0.4))
+    off = Recording("eth", np.arange(4), 1, np.zeros((4, 1, 2)), dt=float(np.float32(0.4)))
+    with pytest.raises(SimulationError, match=r"has steps of 0.4000000059604645 s, but dt is 0.4 s: "):
+        CrowdEnv(EnvConfig(crowd="eth"), off)
+
+
 def masked_trajectory(present):
     """One robot standing at the origin. Human 0 stands 0.1 m from it, walking into it; human 1 comes from
     the other side: at (-2, 0) at row 0 (held there before its track), then (1.5, 0) and (1, 0)."""
