@@ -40,9 +40,9 @@ from typing import Final
 
 import numpy as np
 
-from crowdsim.errors import SimulationError, counted
+from crowdsim.errors import SimulationError, counted, real_number, whole_number
 from crowdsim.formations import Formation, check_robot_spacing, robot_layout
-from crowdsim.world import RECORDED_DT
+from crowdsim.world import RECORDED_DT, finite_positive
 
 # The BIWI EWAP sequences seq_eth and seq_hotel, whole or their last 20 % of frames alone: the TrajNet++ test
 # split, which no shipped net was trained or validated on (pipelines.loop.replay_data)
@@ -81,8 +81,10 @@ class Recording:
         rows = np.asarray(rows, dtype=float)
         if rows.ndim != 2 or rows.shape[1] != 4 or len(rows) == 0 or not np.isfinite(rows).all():
             raise SimulationError(f"recording {name!r}: rows must be a finite (R, 4) array with R >= 1")
-        if isinstance(frame_step, bool) or not isinstance(frame_step, int) or frame_step < 1:
-            raise SimulationError(f"recording {name!r}: frame_step must be an int >= 1, got {frame_step!r}")
+        # numpy's integers too (np.diff(frames).min() is one), as every setting takes them
+        frame_step = whole_number(f"recording {name!r}: frame_step", frame_step, "an int >= 1", 1)
+        # "0.4" was read as 0.4 and "abc" raised numpy's ValueError naming nothing
+        dt = real_number(f"recording {name!r}: dt", dt, "a finite number of seconds > 0", finite_positive)
         if (np.abs(rows[:, :2]) > MAX_KEY).any():  # 1e300 wrapped to an arbitrary int64 frame
             raise SimulationError(
                 f"recording {name!r}: frame and pedestrian ids must be within +-{MAX_KEY:.0e}"
@@ -101,7 +103,7 @@ class Recording:
         frames = _grid(distinct, frame_step)
         positions = np.full((len(frames), len(people), 2), np.nan)
         positions[np.searchsorted(frames, rows[:, 0].astype(np.int64)), person_of] = rows[:, 2:4]
-        return cls(name, frames, frame_step, positions, float(dt))
+        return cls(name, frames, frame_step, positions, dt)
 
     def window_starts(self, steps: int) -> np.ndarray:
         """Rows ``k`` whose next ``steps`` rows follow each other on the frame grid (one grid, no jump)."""

@@ -42,6 +42,22 @@ def test_a_recording_holds_each_track_on_the_frame_grid_and_knows_its_gaps():
         Recording.from_rows("hotel", np.array(rows), frame_step=0)
 
 
+def test_a_frame_step_of_numpys_int_is_taken_and_a_dt_not_a_number_refused():
+    """from_rows refused np.int64(6) as "frame_step must be an int >= 1, got np.int64(6)" (a frame step
+    computed from the frames, np.diff(frames).min(), is one), took dt "0.4" as 0.4 and dt -0.4 (a negative
+    fastest speed in ``extent``), and raised numpy's ValueError naming nothing for "abc"."""
+    rows = np.array(walk(1, range(4), 0.0, 0.4, 0.0))
+    step = np.diff(np.unique(rows[:, 0])).astype(np.int64).min()
+    rec = Recording.from_rows("eth", rows, frame_step=step)
+    assert rec.frame_step == 6 and type(rec.frame_step) is int
+    for dt in ("0.4", "abc", -0.4, 0.0, math.nan, True):
+        with pytest.raises(
+            SimulationError, match=r"^recording 'eth': dt must be a finite number of seconds > 0"
+        ):
+            Recording.from_rows("eth", rows, frame_step=6, dt=dt)  # type: ignore[arg-type]
+    np.testing.assert_allclose(Recording.from_rows("eth", rows, 6, dt=np.float64(0.4)).extent(), (0.6, 1.0))
+
+
 @pytest.mark.parametrize(
     ("spoilt", "message"),
     [
