@@ -319,10 +319,12 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
 
     @property
     def observation(self) -> Observation:
-        """The native observation of the current state (what ``info["observation"]`` holds)."""
+        """The native observation of the current state (what ``info["observation"]`` holds): a copy, as the
+        info's, since the next step's reward and distances are computed from the environment's own, which a
+        policy shifting the humans relative to a robot in place had moved (a contact it never made)."""
         if self._obs is None:
             raise SimulationError("no observation before reset()")
-        return self._obs
+        return ComparableObservation.of(self._obs)
 
     @property
     def simulator(self) -> CrowdEnv:

@@ -691,6 +691,31 @@ def test_a_policy_changing_the_infos_observation_in_place_changes_no_reward():
     assert rewards(relative=True) == rewards(relative=False)
 
 
+def test_a_policy_changing_the_environments_observation_in_place_changes_no_reward():
+    """``CrowdNavEnv.observation`` handed out the state the next step's reward and distances are computed
+    from, where the info's observation was a copy: humans moved onto the first robot in place (a policy's
+    relative frame) made a step of no contact pay the collision penalty."""
+
+    def rewards(moved: bool) -> list[tuple[float, float]]:
+        env = CrowdNavEnv(n_humans=4)
+        env.reset(seed=1)
+        paid = []
+        for _ in range(10):
+            obs = env.observation
+            if moved:
+                obs.human_positions[:] = obs.robot_positions[0]
+                obs.robot_velocities[:] = 0.0
+            _, reward, _, _, info = env.step(np.ones((3, 2)))
+            paid.append((reward, info["min_distance_between_steps"]))
+        return paid
+
+    assert rewards(moved=True) == rewards(moved=False)
+    velocity = VelocityControl(CrowdNavEnv(n_humans=2))  # tracks from its own copy, as before
+    velocity.reset(seed=1)
+    velocity.step(np.full((3, 2), 0.5))
+    np.testing.assert_allclose(velocity.unwrapped.observation.robot_velocities, 0.5)
+
+
 def test_the_velocity_tracker_reads_the_environments_velocities_not_the_infos():
     """VelocityControl tracked the velocities of the info's observation, the very object the policy was
     handed: a policy zeroing them in place (a noisy reading dropped) had every command tracked from rest."""
