@@ -265,7 +265,7 @@ class CrowdEnv:
         timeout = self._step >= cfg.max_steps and not all_there
         self._done = all_there or timeout
         info: dict[str, Any] = {
-            "accelerations": a_applied,
+            "accelerations": a_applied.copy(),  # the trajectory keeps a_applied: the caller's to change
             "clipped": np.any(a_applied != a, axis=1),
             "orca_lp3": int(lp3.sum()),
         }

@@ -323,3 +323,14 @@ def test_profile_reaches_the_layout():
     v1 = CrowdEnv(V1).reset(0, "perpendicular", 5)
     assert np.all(np.abs(paper.human_positions[:, 0]) >= 5.0)  # the fork's U(1.0, 1.2) * 5
     assert not np.array_equal(paper.human_positions, v1.human_positions)
+
+
+def test_changing_the_steps_info_in_place_leaves_the_trajectory_as_it_was():
+    """info["accelerations"] was the array the trajectory records: a caller scaling it in place rewrote
+    trajectory().robot_accelerations (a record of accelerations never applied)."""
+    env = CrowdEnv()
+    env.reset(0, "circle", 2, 3)
+    _, _, info = env.step(np.ones((3, 2)))
+    info["accelerations"] *= 0.0
+    np.testing.assert_array_equal(env.trajectory().robot_accelerations[0], np.ones((3, 2)))
+    np.testing.assert_array_equal(env.step(np.ones((3, 2)))[0].robot_last_actions, np.ones((3, 2)))
