@@ -129,7 +129,7 @@ class Recording:
             target = math.pi / 2 if scenario == "circle" else 0.0
             angle = target - math.atan2(direction[1], direction[0])
             c, s = math.cos(angle), math.sin(angle)
-            kept[scenario] = (self.positions - centre) @ np.array([[c, -s], [s, c]]).T
+            kept[scenario] = _read_only((self.positions - centre) @ np.array([[c, -s], [s, c]]).T)
         return kept[scenario]
 
     def extent(self) -> tuple[float, float]:
@@ -163,7 +163,7 @@ class Recording:
         direction = vectors[:, -1]
         if direction[0] < 0 or (direction[0] == 0 and direction[1] < 0):
             direction = -direction
-        return np.median(tracked, axis=0), direction
+        return _read_only(np.median(tracked, axis=0)), _read_only(direction)
 
 
 @dataclass(frozen=True)
@@ -297,6 +297,13 @@ def _check_keys(name: str, keys: np.ndarray) -> None:
             f"recording {name!r}: rows hold {held}; the first is rows[{row}]: frame {frame}, pedestrian "
             f"{person}, already at rows[{first_of_key[row]}]"
         )
+
+
+def _read_only(values: np.ndarray) -> np.ndarray:
+    """``values``, which a ``Recording`` keeps for every later episode, locked against in place changes: a
+    caller's ``turned("circle") -= ...`` had moved every episode drawn after it."""
+    values.flags.writeable = False
+    return values
 
 
 def _grid(frames: np.ndarray, step: int) -> np.ndarray:

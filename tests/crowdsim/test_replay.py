@@ -302,3 +302,17 @@ def test_the_metrics_count_a_human_only_where_it_is_tracked():
     assert (tracked.collision_steps, tracked.discomfort_steps) == (0, 0)
     assert tracked.min_distance_humans == math.inf  # never two tracked at once
     assert everyone.min_distance_humans == pytest.approx(0.9)
+
+
+def test_what_a_recording_keeps_for_its_episodes_cannot_be_changed_in_place():
+    """turned() and flow() handed out the arrays the recording keeps for every later episode: a caller
+    centring ``turned("circle")`` in place (NaN where nobody is tracked) left no window with anyone in it."""
+    rec = four_people()
+    first = replay_episode(rec, "circle", 2, 3, 10, np.random.default_rng(0), radius=0.3, past=2)
+    for kept in (rec.turned("circle"), *rec.flow()):
+        with pytest.raises(ValueError, match="read-only"):
+            kept -= 1.0
+    again = replay_episode(rec, "circle", 2, 3, 10, np.random.default_rng(0), radius=0.3, past=2)
+    np.testing.assert_array_equal(again.positions, first.positions)
+    rows = rec.turned("circle").copy()  # a copy is the caller's
+    rows -= 1.0
