@@ -29,6 +29,7 @@ import numpy as np
 
 from pipelines.errors import PipelineError
 from pipelines.logs.identity import check_replaceable, run_identity
+from pipelines.logs.names import episode_filename as episode_filename  # its callers import it from here
 from pipelines.logs.reader import decode_metadata
 from pipelines.logs.recorder import UNFINISHED_SUFFIX, McapRecorder
 from pipelines.logs.scene import PLAN_DECIMALS, SceneBuilder, array_json
@@ -51,16 +52,6 @@ if TYPE_CHECKING:
     from pipelines.loop.episode import EpisodeResult
 
 FORMAT: Final[str] = EPISODE_FORMAT  # what this recorder writes (pipelines.logs.schemas says what it means)
-
-
-def episode_filename(scenario: str, seed: int | None, unseeded: int = 0, repeat: int = 0) -> str:
-    """The file of an episode: by its seed, or for one no seed drew (a gym episode started from a layout)
-    by its number, ``unseeded``. ``repeat``: how many episodes of that seed the recorder was handed before
-    this one (a gym loop may reset to one seed again, with other actions), each kept in its own file,
-    ``<scenario>_seed<seed:06d>_<repeat>.mcap`` past the first."""
-    if seed is None:
-        return f"{scenario}_{unseeded:06d}.mcap"
-    return f"{scenario}_seed{seed:06d}" + (f"_{repeat}" if repeat else "") + ".mcap"
 
 
 def next_unseeded(out_dir: Path, scenario: str, written: int = -1) -> int:

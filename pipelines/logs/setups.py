@@ -6,9 +6,11 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.logs.identity import MISSING, RUN_IDENTITY, shown
+from pipelines.logs.names import repeat_of
 from pipelines.logs.review import commit_shown, count
 
 if TYPE_CHECKING:
@@ -64,11 +66,14 @@ def drop_repeats(setup: SetUp) -> dict[str, str]:
     """Leave each episode once among ``setup``'s members, and return each file left out -> the file kept in
     its place. An episode is its scenario and seed recorded by one code ("commit+dirty" and the plugins'
     files, or none recorded): a folder holding two copies of a run's files (a/ and a backup b/) pooled both,
-    "collision 38.5 % (5/13)" where the ten episodes had 3. A run whose scenario or seed is unknown (cut
-    before its metadata) is never a repeat. The copy kept is the first complete and undamaged one whose
-    episode ended, else the first complete one, else the first whose episode ended, else the first (a killed
-    run's file beside its rerun's; a copy with a bad chunk, whose lost solver steps the table's times left
-    out, beside an intact one)."""
+    "collision 38.5 % (5/13)" where the ten episodes had 3. Of a seed one recorder was handed again (a gym
+    loop resetting to it, its policy acting otherwise) each episode is its own, told by the repeat in its
+    file's name (``names.repeat_of``): ``circle_seed000003_1.mcap`` was left out as a copy of
+    ``circle_seed000003.mcap``, the policy's second episode uncounted. A run whose scenario or seed is
+    unknown (cut before its metadata) is never a repeat. The copy kept is the first complete and undamaged
+    one whose episode ended, else the first complete one, else the first whose episode ended, else the first
+    (a killed run's file beside its rerun's; a copy with a bad chunk, whose lost solver steps the table's
+    times left out, beside an intact one)."""
     kept: dict[tuple[Any, ...], RunDigest] = {}
     repeats: dict[str, str] = {}
     members = []
@@ -80,7 +85,8 @@ def drop_repeats(setup: SetUp) -> dict[str, str]:
     for run in sorted(setup.members, key=worse):  # stable: in the folder's order among equals
         s = run.summary
         plugins = s.get("crowdmpc_plugins") or {}
-        key = (s["scenario"], s["seed"], commit_shown(s), tuple(sorted(plugins.items(), key=str)))
+        repeat = repeat_of(Path(run.file).name, s["scenario"], s["seed"])
+        key = (s["scenario"], s["seed"], repeat, commit_shown(s), tuple(sorted(plugins.items(), key=str)))
         if s["scenario"] is None or s["seed"] is None or key not in kept:
             kept.setdefault(key, run)
             members.append(run)

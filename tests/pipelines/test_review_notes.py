@@ -270,3 +270,34 @@ def test_compare_with_animate_is_refused_before_reading(runs, tmp_path, capsys):
         "crowdmpc review: error: --animate animates one run, not --compare's two; animate each on its own\n"
     )
     assert not (tmp_path / "a.gif").exists()
+
+
+def test_a_gym_loops_episodes_of_one_seed_each_count(tmp_path, capsys):
+    """A gym loop resetting to one seed with another policy records each episode in its own file
+    (``circle_seed000003_1.mcap``), yet the folder's review left the second out as a copy of the first:
+    "1 run" for two episodes that drove apart. Copies of either file still count once."""
+    import numpy as np
+
+    from pipelines.loop.gym_loop import ObserveEpisodes, make_env
+
+    runs = tmp_path / "runs"
+    with McapEpisodeRecorder(runs) as recorder:
+        env = ObserveEpisodes(make_env(None, n_humans=2, n_robots=1), [recorder])
+        for acceleration in (0.5, -0.5):
+            env.reset(seed=3)
+            for _ in range(3):
+                env.step(np.full(env.action_space.shape, acceleration))
+        env.close()
+    first, second = recorder.paths
+    assert second.name == "circle_seed000003_1.mcap"
+    assert main(["review", str(runs)]) == 0
+    out, err = capsys.readouterr()
+    assert "\n2 runs\n" in out and not _warnings(err)
+    backup = tmp_path / "backup"
+    backup.mkdir()
+    shutil.copy(second, backup / second.name)
+    assert main(["review", str(tmp_path), "--json", str(tmp_path / "r.json")]) == 0
+    out, err = capsys.readouterr()
+    (group,) = json.loads((tmp_path / "r.json").read_text())["groups"]
+    assert group["repeats"] == {str(runs / second.name): str(backup / second.name)}
+    assert "\n2 runs\n" in out
