@@ -5,6 +5,8 @@ from __future__ import annotations
 from typing import Any
 from weakref import WeakKeyDictionary
 
+from torch import nn
+
 from predictors.errors import PredictorError
 
 # The module whose forward runs now, innermost last: pushed and popped by predictors.export.trace's hooks.
@@ -33,13 +35,58 @@ def current_module() -> str:
     return MODULE_STACK[-1] if MODULE_STACK else "<top>"
 
 
+# The torch.nn layers whose forward the export replaces by a CasADi form (predictors.export.trace.REPLACED's
+# keys, entered there), and the methods of theirs that run only to build or show a layer, not in forward.
+MAPPED_LAYERS: set[type] = set()
+NOT_IN_FORWARD = frozenset(
+    {"__init__", "__setstate__", "_reset_parameters", "reset_parameters", "extra_repr"}
+    | {"generate_square_subsequent_mask"}  # nn.Transformer's, called by the user to make a mask
+)
+
+
+def torch_layer(layer: type) -> type | None:
+    """The torch.nn layer ``layer`` is or derives from (the first in its MRO; nn.Module does not count)."""
+    for cls in layer.__mro__:
+        if cls.__module__.startswith("torch.nn.") and cls is not nn.Module:
+            return cls
+    return None
+
+
+def own_methods(layer: type, base: type) -> list[str]:
+    """The methods of ``base`` (or its torch bases) that ``layer``, a subclass, overrides and torch's forward
+    may call (``forward``, ``_sa_block`` ...): where there are none, ``layer`` runs ``base``'s forward."""
+    names = {n for cls in base.__mro__[: base.__mro__.index(nn.Module)] for n in vars(cls)} - NOT_IN_FORWARD
+    return sorted(
+        n for n in names if callable(getattr(base, n, None)) and getattr(layer, n) is not getattr(base, n)
+    )
+
+
+def _inside(layer: type) -> tuple[str, str]:
+    """Where an unsupported operation ran, when that is a torch.nn layer or a user's subclass of a mapped
+    one, and what to do."""
+    base = torch_layer(layer)
+    if base is layer:
+        return f", inside torch.nn.{base.__name__}, a layer the export does not map", SUPPORTED_LIST
+    # a user's net may derive from a torch.nn container (nn.Sequential): only a mapped layer's subclass is
+    # named
+    own = " and ".join(own_methods(layer, base)) if base is not None and base in MAPPED_LAYERS else ""
+    if base is None or not own:  # the export maps a subclass that keeps all of torch's forward
+        return "", SUPPORTED_LIST
+    torch_name = f"torch.nn.{base.__name__}"
+    return (
+        f", inside {layer.__qualname__}, a subclass of {torch_name} with its own {own} (the export maps "
+        "torch's own layer only)",
+        f"keep {torch_name} itself as a submodule with your steps around it, or write them in the supported "
+        "operations, listed in docs/extending.md, section 1",
+    )
+
+
 def unsupported(what: str) -> ExportError:
     """The refusal of an operation no dispatch table holds (``what``: "operation torch.sort"): the torch.nn
-    layer it ran in where it ran in one, and where the supported operations are listed."""
+    layer (or a user's subclass of a mapped one) it ran in where it ran in one, and what to do."""
     layer = LAYER_STACK[-1] if LAYER_STACK else None
-    if layer is not None and layer.__module__.startswith("torch.nn."):
-        what = f"{what}, inside torch.nn.{layer.__name__}, a layer the export does not map"
-    return ExportError(f"unsupported {what}", current_module(), SUPPORTED_LIST)
+    inside, hint = ("", SUPPORTED_LIST) if layer is None else _inside(layer)
+    return ExportError(f"unsupported {what}{inside}", current_module(), hint)
 
 
 class ExportError(PredictorError):

@@ -21,7 +21,16 @@ from torch import nn
 
 from predictors.export.attention import multihead_attention
 from predictors.export.elementwise import sigmoid
-from predictors.export.errors import LAYER_STACK, MODULE_STACK, TRACING, ExportError, current_module
+from predictors.export.errors import (
+    LAYER_STACK,
+    MAPPED_LAYERS,
+    MODULE_STACK,
+    TRACING,
+    ExportError,
+    current_module,
+    own_methods,
+    torch_layer,
+)
 from predictors.export.linalg import linear
 from predictors.export.movement import squeeze, unsqueeze
 from predictors.export.ops import register
@@ -113,7 +122,8 @@ def gru_cell(cell: nn.GRUCell, input: Any, hx: Any = None) -> SymTensor:  # noqa
 # The layers whose forward is replaced by its CasADi form while traced: the recurrent cells call fused
 # kernels, and nn.MultiheadAttention's, nn.TransformerEncoderLayer's and nn.TransformerEncoder's forwards
 # ask their inputs what a symbolic tensor cannot answer (query.is_nested, torch.is_floating_point of a mask)
-# to choose torch's fast path. Keyed by the exact class: a subclass may have a forward of its own.
+# to choose torch's fast path. A user's subclass is replaced as its torch layer only where it keeps all of
+# torch's forward (``_form``); one with a forward of its own runs that.
 REPLACED: dict[type[nn.Module], Callable[..., Any]] = {
     nn.LSTMCell: lstm_cell,
     nn.GRUCell: gru_cell,
@@ -124,6 +134,18 @@ REPLACED: dict[type[nn.Module], Callable[..., Any]] = {
     nn.TransformerDecoder: transformer_decoder,
     nn.Transformer: transformer,
 }
+MAPPED_LAYERS.update(REPLACED)  # a refusal inside a subclass of one of them names it (errors.unsupported)
+
+
+def _form(module: nn.Module) -> Callable[..., Any] | None:
+    """The CasADi form that replaces ``module``'s forward: its class's, or its torch layer's where the class
+    is a user's subclass that overrides none of the methods torch's forward calls (one that only adds
+    attributes runs torch's forward, which a symbolic tensor cannot run); else None (its forward runs)."""
+    layer = type(module)
+    base = torch_layer(layer)
+    if base is None or base not in REPLACED or (base is not layer and own_methods(layer, base)):
+        return None
+    return REPLACED[base]
 
 
 # ----------------------------------------------------------------------------------------------- tracing
@@ -134,7 +156,7 @@ def symbolic_run(net: nn.Module) -> Iterator[None]:
     names = {id(module): name or type(net).__name__ for name, module in net.named_modules()}
     patched = []
     for module in net.modules():
-        form = REPLACED.get(type(module))
+        form = _form(module)
         if form is not None:
             module.forward = functools.partial(form, module)  # this instance only, removed below
             patched.append(module)
