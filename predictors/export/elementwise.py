@@ -119,6 +119,12 @@ def where(condition, a, b):
     )
 
 
+def is_nan(m):
+    """1 where ``m`` is NaN, else 0: NaN fails every comparison, and this is one CasADi keeps (it folds
+    ``m != m`` to 0, as if no entry could be NaN)."""
+    return ca.logic_not(m <= math.inf)
+
+
 def unary(op: Callable[[Any], Any]) -> Callable[..., SymTensor]:
     def apply(x, *args, **kwargs):
         x = lift(x)

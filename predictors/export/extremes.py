@@ -5,6 +5,10 @@ it evenly among the equal entries, ``torch.max(x, dim)`` gives it all to the fir
 index torch returns. Those indices cannot be exported (a function of the inputs' values gives numbers with a
 derivative, not positions): the values come back with an ``Unexportable`` in their place, refused where a
 later operation uses it.
+
+A NaN is the extreme, as in torch, where CasADi's fmax (``row_max``) passes over it: the NaN entries join the
+ties (``amax``), or alone are the ties (``torch.max(x, dim)``: the first NaN, whose index torch returns and to
+which its gradient goes). Rows without a NaN keep their values and Jacobians.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ from typing import Any
 import casadi as ca
 import torch
 
-from predictors.export.elementwise import binary
+from predictors.export.elementwise import binary, is_nan
 from predictors.export.errors import ExportError, current_module
 from predictors.export.linalg import reduce_dims, row_max, to_last
 from predictors.export.movement import normal_dim, reshape
@@ -38,7 +42,7 @@ def _extreme(x, dim, keepdim, sign: int) -> SymTensor:
     merged, kept = to_last(x, dims)
     m = merged.m * sign
     top = ca.repmat(row_max(m), 1, m.shape[1])
-    ties = m == top
+    ties = ca.logic_or(m == top, is_nan(m))  # a NaN among them makes the mean NaN, torch's value
     # if_else, not m * ties: an entry of -inf that is not the extreme would make 0 * -inf NaN
     value = ca.sum2(ca.if_else(ties, merged.m, 0)) / ca.sum2(ties)
     return reshape(SymTensor(value, kept + (1,)), _kept_shape(x, dims, keepdim, kept))
@@ -52,12 +56,22 @@ def amin(x, dim=(), keepdim=False, *, out=None):
     return _extreme(x, dim, keepdim, -1)
 
 
+def _nan_first(extreme: Callable[[Any, Any], Any]) -> Callable[[Any, Any], Any]:
+    """``extreme`` (ca.fmax, ca.fmin: torch's slope 0.5 at a tie) of two entries, NaN where either is NaN,
+    as torch.maximum and torch.minimum, where fmax gives the other entry."""
+
+    def apply(p, q):
+        return ca.if_else(ca.logic_or(is_nan(p), is_nan(q)), p + q, extreme(p, q), False)
+
+    return apply
+
+
 def maximum(a, b):
-    return binary(ca.fmax, a, b)
+    return binary(_nan_first(ca.fmax), a, b)
 
 
 def minimum(a, b):
-    return binary(ca.fmin, a, b)
+    return binary(_nan_first(ca.fmin), a, b)
 
 
 def _first_extreme(x: SymTensor, dim: int, keepdim: bool, sign: int) -> SymTensor:
@@ -72,11 +86,15 @@ def _first_extreme(x: SymTensor, dim: int, keepdim: bool, sign: int) -> SymTenso
     dims = [normal_dim(dim, x.ndim)]
     merged, kept = to_last(x, dims)
     m = merged.m * sign
-    top = row_max(m)
+    top = ca.repmat(row_max(m), 1, m.shape[1])
+    # in a row that holds a NaN, torch's extreme is its first NaN: the NaN entries are then the ties
+    nan = is_nan(m)
+    has_nan = ca.repmat(ca.sum2(nan) > 0, 1, m.shape[1])
+    ties = ca.if_else(has_nan, nan, m == top, False)
     value: Any = 0
     taken: Any = 0  # whether an earlier entry of the row was the extreme
     for j in range(m.shape[1]):
-        tie = m[:, j] == top
+        tie = ties[:, j]
         first = ca.logic_and(tie, ca.logic_not(taken)) if j else tie
         # if_else, as in _extreme: an entry of -inf that is not taken must not make 0 * -inf NaN
         value = value + ca.if_else(first, merged.m[:, j], 0)

@@ -128,3 +128,44 @@ def test_max_over_several_dims_is_refused_as_torch_refuses_it():
         ExportError, match=r"x\.max over dim=\(0, 1\) \(one int, as torch takes; torch\.amax takes"
     ):
         export_function(module, module.forward, [TensorSpec("x", (3, 3))], ["y"], "f")
+
+
+NAN = math.nan
+# a NaN alone in a row, beside a larger entry, beside an equal-looking tie, first and last; a row of two NaN
+# and a finite one; a row without one, whose values stay as they were
+NAN_POINT = [[1.0, NAN, 3.0], [NAN, 5.0, NAN], [-0.7, -0.7, 1.1]]
+NAN_CASES = {
+    "amax_amin": lambda m, x: torch.cat([x.amax(-1), x.amin(0), torch.amax(x)[None], x.T.amin(-1)]),
+    "max_min_dim": lambda m, x: torch.cat([x.max(1).values, x.min(0).values, x.T.max(-1)[0]]),
+    "max_min_every_entry": lambda m, x: torch.stack([x.max(), x.min(), x[2].max(), x[2].min()]),
+    "maximum_minimum": lambda m, x: torch.cat(
+        [torch.maximum(x, x.T), torch.minimum(x, torch.full_like(x, 2.0))]
+        + [torch.max(x, x[:, [2, 1, 0]]), torch.min(-x, other=x.T)]
+    ),
+}
+
+
+@pytest.mark.parametrize("symbol", [ca.MX, ca.SX], ids=["MX", "SX"])
+@pytest.mark.parametrize("name", sorted(NAN_CASES))
+def test_a_nan_is_the_extreme_as_in_torch(name, symbol):
+    """torch's extremes propagate NaN (the max of [1, nan] is nan); CasADi's fmax, which they were built on,
+    passes over it, so the export gave 3 where torch gives NaN."""
+    module = Wrap(NAN_CASES[name]).double()
+    x = torch.tensor(NAN_POINT, dtype=torch.float64)
+    function = export_function(module, module.forward, [TensorSpec("x", (3, 3))], ["y"], "f", symbol=symbol)
+    expected = module(x).reshape(-1).numpy()
+    got = np.asarray(function(x.numpy().ravel())).ravel()
+    assert np.isnan(expected).any() and not np.isnan(expected).all()
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(expected))
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+
+
+def test_the_gradient_of_max_over_a_dim_goes_to_the_first_nan_as_torchs():
+    """torch.max(x, dim) returns the first NaN of a row and its index, to which its gradient goes."""
+    module = Wrap(NAN_CASES["max_min_dim"]).double()
+    x = torch.tensor(NAN_POINT, dtype=torch.float64)
+    function = export_function(module, module.forward, [TensorSpec("x", (3, 3))], ["y"], "f")
+    a = ca.MX.sym("a", 9)
+    got = np.asarray(ca.Function("j", [a], [ca.jacobian(function(a), a)])(x.numpy().ravel()))
+    torch_jac = torch.autograd.functional.jacobian(lambda y: module(y).reshape(-1), x).reshape(got.shape)
+    np.testing.assert_array_equal(got, torch_jac.numpy())
