@@ -140,9 +140,14 @@ def unary(op: Callable[[Any], Any]) -> Callable[..., SymTensor]:
 # bit.
 _SIGMOID_FLOOR = -709.0
 
+# NaN fails every comparison, so each if_else below tests the condition under which the result is not the
+# input (m <= 0 for relu): a NaN input then takes the input's branch and stays NaN, as in torch (relu, clamp
+# and sigmoid of NaN are NaN), where m > 0 sent it to the constant. Finite inputs take the same branch as
+# with the converse test, so their values and derivatives are unchanged.
+
 
 def sigmoid(m):
-    return 1 / (1 + ca.exp(-ca.if_else(m > _SIGMOID_FLOOR, m, _SIGMOID_FLOOR, False)))
+    return 1 / (1 + ca.exp(-ca.if_else(m <= _SIGMOID_FLOOR, _SIGMOID_FLOOR, m, False)))
 
 
 def gelu(x, approximate="none"):
@@ -166,8 +171,9 @@ def softplus(x, beta=1.0, threshold=20.0):
 # which has torch's derivative and the same values.
 def relu(m):
     # one node more than fmax (the comparison), yet no slower: every shipped net's encoder and twin took
-    # 0.96-1.00x the time of the fmax form, alternating calls of both in one process
-    return ca.if_else(m > 0, m, 0, False)
+    # 0.96-1.00x the time of the fmax form, alternating calls of both in one process; and one more for NaN
+    # (the not of m <= 0, see above)
+    return ca.if_else(m <= 0, 0, m, False)
 
 
 def leaky_relu(x, negative_slope=0.01, inplace=False):
@@ -176,21 +182,33 @@ def leaky_relu(x, negative_slope=0.01, inplace=False):
 
 
 def _at_least(p, q):
-    return ca.if_else(p >= q, p, q, False)
+    return ca.if_else(p < q, q, p, False)
 
 
 def _at_most(p, q):
-    return ca.if_else(p <= q, p, q, False)
+    return ca.if_else(p > q, q, p, False)
+
+
+def _nan_bound(bounded: Callable[[Any, Any], Any]) -> Callable[[Any, Any], Any]:
+    """``bounded`` by a bound that may be NaN (a tensor's entry): NaN where it is, as torch's clamp."""
+    return lambda p, q: ca.if_else(is_nan(q), q, bounded(p, q), False)
+
+
+def _bound(bounded: Callable[[Any, Any], Any], bound: Any) -> Callable[[Any, Any], Any]:
+    # a constant bound free of NaN (clamp(min=eps), the common one) needs no test of it
+    if isinstance(bound, SymTensor) or np.isnan(constant(bound)).any():
+        return _nan_bound(bounded)
+    return bounded
 
 
 def clamp(x, min=None, max=None):  # noqa: A002 (torch's names)
     """``min(max(x, min), max)`` as torch: each bound broadcast against the running result, slope 1 at a bound
-    (and, with min > max, ``max`` everywhere)."""
+    (and, with min > max, ``max`` everywhere); NaN where ``x`` or a bound is NaN."""
     y = as_float(lift(x))
     if min is not None:
-        y = binary(_at_least, y, min)
+        y = binary(_bound(_at_least, min), y, min)
     if max is not None:
-        y = binary(_at_most, y, max)
+        y = binary(_bound(_at_most, max), y, max)
     return y
 
 
