@@ -82,10 +82,11 @@ TWO_NORM_ORDERS = (2, 2.0, "fro", None)
 
 def two_norm(x, dim=None, keepdim=False):
     """sqrt of the sum of squares over ``dim``, with torch's gradient at 0: 0 (its subgradient), where
-    sqrt's would be inf and a pair's distance to itself (always 0) made every Jacobian NaN."""
+    sqrt's would be inf and a pair's distance to itself (always 0) made every Jacobian NaN; NaN where the sum
+    is, as torch's."""
     squares = reduce_sum(mul(x, x), dim, keepdim)
     m = squares.m
-    positive = m > 0
+    positive = m != 0  # as m > 0 for a sum of squares, and true for NaN, which m > 0 sent to 0
     # sqrt is taken of 1 where the sum is 0, so neither branch's derivative is inf there
     return SymTensor(ca.if_else(positive, ca.sqrt(ca.if_else(positive, m, 1)), 0), squares.shape_)
 

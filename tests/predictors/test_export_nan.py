@@ -1,9 +1,10 @@
-"""NaN through the exported activations: NaN where torch gives NaN, the other entries as torch's.
+"""NaN through the exported activations and 2-norms: NaN where torch gives NaN, the other entries as torch's.
 
 CasADi's comparisons are false for NaN, and the export's if_else forms of relu, clamp and sigmoid sent a
 NaN to their constant branch: relu(nan) was 0, clamp(nan, 0, 2) was 0, sigmoid(nan) was 1.2e-308 (its floor),
-where torch's are NaN, so an exported net fed a NaN (a missing position) gave numbers. The extremes' NaN
-(amax, torch.max ...) is tested in test_export_extremes.py.
+where torch's are NaN, so an exported net fed a NaN (a missing position) gave numbers. The 2-norm (torch.norm,
+F.normalize, torch.cdist) of a NaN was 0, its sqrt taken only where the sum of squares is > 0. The extremes'
+NaN (amax, torch.max ...) is tested in test_export_extremes.py.
 """
 
 from __future__ import annotations
@@ -34,12 +35,17 @@ CASES = {
         [x[0].clamp(min=NAN), y[1].clamp(max=torch.tensor(NAN)), x[2].clamp(min=0.0)]
     ),
     "sigmoid": lambda m, x, y: torch.sigmoid(x) + 2 * F.sigmoid(-x),
+    "norms": lambda m, x, y: torch.cat(
+        [torch.norm(x, dim=1, keepdim=True), x[:, :2].norm(dim=0)[None].expand(3, 2), F.normalize(x, dim=0)],
+        1,
+    ),
+    "cdist": lambda m, x, y: torch.cdist(x[:, :2], y[:, :2]),
 }
 
 
 @pytest.mark.parametrize("symbol", [ca.MX, ca.SX], ids=["MX", "SX"])
 @pytest.mark.parametrize("name", sorted(CASES))
-def test_an_activation_of_nan_is_nan_as_torchs(name, symbol):
+def test_nan_stays_nan_as_in_torch(name, symbol):
     module = Wrap(CASES[name]).double()
     inputs = [torch.tensor(p, dtype=torch.float64) for p in (POINT, BOUNDS)]
     specs = [TensorSpec(n, (3, 4)) for n in ("x", "y")]
