@@ -66,7 +66,9 @@ def _inside(layer: type) -> tuple[str, str]:
     one, and what to do."""
     base = torch_layer(layer)
     if base is layer:
-        return f", inside torch.nn.{base.__name__}, a layer the export does not map", SUPPORTED_LIST
+        # inside a mapped layer the user's code is a callable it was given (its activation), not the layer
+        unmapped = "" if base in MAPPED_LAYERS else ", a layer the export does not map"
+        return f", inside torch.nn.{base.__name__}{unmapped}", SUPPORTED_LIST
     # a user's net may derive from a torch.nn container (nn.Sequential): only a mapped layer's subclass is
     # named
     own = " and ".join(own_methods(layer, base)) if base is not None and base in MAPPED_LAYERS else ""

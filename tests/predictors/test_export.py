@@ -417,8 +417,14 @@ def test_unsupported_operation_names_the_op_and_the_module():
             r"unsupported operation torch\.cartesian_prod \(in module 'Wrap'\)",
         ),
         (lambda m, x: x.cumsum(-1), {}, r"unsupported tensor method \.cumsum\(\) \(in module 'Wrap'\)"),
+        (  # a layer the export maps, running the user's activation: not "a layer the export does not map"
+            lambda m, x: m.layer(x),
+            {"layer": nn.TransformerEncoderLayer(4, 2, 8, activation=lambda y: y.cumsum(-1))},
+            r"unsupported tensor method \.cumsum\(\), inside torch\.nn\.TransformerEncoderLayer "
+            r"\(in module 'layer'\)",
+        ),
     ],
-    ids=["torch_nn_layer", "torch_functional", "tensor_method"],
+    ids=["torch_nn_layer", "torch_functional", "tensor_method", "mapped_layer"],
 )
 def test_unsupported_operation_names_the_layer_the_user_wrote_and_where_the_supported_ones_are(
     fn, modules, message
