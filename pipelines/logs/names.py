@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import re
 
+from pipelines.logs.recorder import UNFINISHED_SUFFIX
+
 
 def episode_filename(scenario: str, seed: int | None, unseeded: int = 0, repeat: int = 0) -> str:
     """The file of an episode: by its seed, or for one no seed drew (a gym episode started from a layout)
@@ -21,10 +23,11 @@ def episode_filename(scenario: str, seed: int | None, unseeded: int = 0, repeat:
 
 def repeat_of(name: str, scenario: object, seed: object) -> int:
     """Which episode of ``seed`` the file ``name`` holds, as ``episode_filename`` numbers them: ``k`` for
-    ``<scenario>_seed<seed:06d>_<k>.mcap`` (a gym loop that reset to the seed again; its ``.part`` too), 0
-    for any other name (the first, or a file named otherwise)."""
+    ``<scenario>_seed<seed:06d>_<k>.mcap`` (a gym loop that reset to the seed again) or its unfinished file
+    (``UNFINISHED_SUFFIX``: a killed loop's last episode), 0 for any other name (the first, or a file named
+    otherwise)."""
     if not isinstance(scenario, str) or not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
         return 0
-    first = episode_filename(scenario, seed)
-    match = re.fullmatch(re.escape(first.removesuffix(".mcap")) + r"_([1-9]\d*)\.mcap(?:\.part)?", name)
+    stem = re.escape(episode_filename(scenario, seed).removesuffix(".mcap"))
+    match = re.fullmatch(stem + rf"_([1-9]\d*)\.mcap(?:{re.escape(UNFINISHED_SUFFIX)})?", name)
     return int(match.group(1)) if match else 0
