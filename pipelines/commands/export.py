@@ -181,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
         print_note(note)
     predictor = load_predictor(args.name) if located is None else load_located(located)
     if (args.humans + args.robots) * args.horizon >= LONG_EXPORT and args.name not in PREDICTORS:
-        print_note(
+        print_note(  # one CasADi call builds and checks it: Ctrl-C and kill -TERM wait for it to return
             f"note: a net's twin for {args.humans + args.robots} agents over {args.horizon} steps takes long "
             "to build and check (here 9 s at 62 agents over 5 steps, 78 s over 20, 8 minutes over 100); an "
             "interrupt waits for CasADi to return"
