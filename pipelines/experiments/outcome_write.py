@@ -15,6 +15,7 @@ from pipelines.errors import PipelineError
 from pipelines.experiments.log import ERRORS_FILE, EpisodeLog, mcap_path, write_whole
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import EpisodeOutcome
+from pipelines.loop.interrupt import interrupts_between_steps
 
 
 class _Counts(Protocol):  # pipelines.experiments.sweep's SweepOutcome, which imports this module
@@ -35,6 +36,13 @@ class OutcomeWriter:
     backend: str  # its name, for a backend's answer for an episode it was not given
 
     def __call__(self, result: EpisodeOutcome) -> None:
+        # An interrupt (Ctrl-C; SIGTERM or SIGHUP under terminate_as_interrupt) is held until the outcome is
+        # written and counted, as during an episode's step: raised halfway, it lost the record of an episode
+        # that had run (its MCAP log written, the record not), and a rerun ran it again.
+        with interrupts_between_steps():
+            self._write(result)
+
+    def _write(self, result: EpisodeOutcome) -> None:
         out = self.log.path.parent
         task = self.tasks.get(result.key)
         if task is None:  # a backend of one's own (backend_factory) answering for another episode

@@ -97,10 +97,11 @@ _overdue: BaseException | None = None  # overdue_at_step_ends'
 
 @contextlib.contextmanager
 def interrupts_between_steps() -> Iterator[StepInterrupt]:
-    """Around an episode's steps: a Ctrl-C is raised by the ``check()`` that follows it (one a step), or on
-    leaving the block, so none is lost; with another SIGINT handler in place (or SIGINT ignored) that handler
-    keeps Ctrl-C, and ``check()`` raises only a SIGTERM or SIGHUP noted by ``terminate_as_interrupt``; off the
-    main thread as before (``check()`` then never raises)."""
+    """Around an episode's steps, and a sweep driver's write of an outcome (experiments.outcome_write): a
+    Ctrl-C is raised by the ``check()`` that follows it (one a step), or on leaving the block, so none is
+    lost; with another SIGINT handler in place (or SIGINT ignored) that handler keeps Ctrl-C, and ``check()``
+    raises only a SIGTERM or SIGHUP noted by ``terminate_as_interrupt``; off the main thread as before
+    (``check()`` then never raises)."""
     step = StepInterrupt()
     if threading.current_thread() is not threading.main_thread():
         yield step

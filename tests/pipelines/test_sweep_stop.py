@@ -165,3 +165,37 @@ def test_the_ray_backend_gives_back_what_its_actors_finished_and_counts_the_rest
     assert backend.finished(7.0) == (["outcome of a"], 2)
     assert backend._ray.timeouts == [0.0 if gcs_gone else 7.0]
     assert backend.finished(7.0) == ([], 0)  # given once
+
+
+@pytest.mark.parametrize("sent", ["INT", "TERM"])
+def test_an_interrupt_while_an_outcome_is_written_is_held_until_its_record_is(
+    sent,
+    tmp_path,
+    monkeypatch,
+    ctrl_c,
+):
+    """Ctrl-C (or `kill`) as the driver wrote an episode's MCAP log was raised there, before the record that
+    vouches for it: the episode, which had run, was lost and a rerun ran it again. The interrupt is held until
+    the record is written and counted, then raised."""
+    from pipelines.experiments import outcome_write
+    from pipelines.experiments.sweep import SweepOutcome
+    from pipelines.experiments.worker import EpisodeOutcome
+    from pipelines.loop.interrupt import terminate_as_interrupt
+    from tests.pipelines.test_sweep import _controllers
+
+    (task,) = _controllers(tmp_path, 1, ["straight"]).tasks()
+    written = outcome_write.write_atomic
+
+    def interrupted_write(path, data):  # the signal comes as the MCAP log is written
+        os.kill(os.getpid(), signal.Signals["SIG" + sent])
+        written(path, data)
+
+    monkeypatch.setattr(outcome_write, "write_atomic", interrupted_write)
+    outcome = SweepOutcome(planned=1, already_done=0)
+    bar = types.SimpleNamespace(update=lambda n: None, set_postfix=lambda **kw: None)
+    log = EpisodeLog(tmp_path / EPISODES_FILE)
+    keep = outcome_write.OutcomeWriter(log, outcome, {task.key: task}, 1, None, bar, "process")
+    with pytest.raises(KeyboardInterrupt), terminate_as_interrupt():
+        keep(EpisodeOutcome(task.key, record={"key": task.key}, mcap=b"recording"))
+    assert [record["key"] for record in log.load().values()] == [task.key]
+    assert outcome.ran == 1
