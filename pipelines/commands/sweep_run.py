@@ -77,6 +77,8 @@ def run_cells(
     elif outcome.interrupted:  # no backend: stopped while it started (joining a cluster), before any episode
         again = "resume" if outcome.backend or outcome.already_done else "start it"
         why = "" if outcome.backend else " (stopped while its workers started: no episode ran this run)"
-        print_note(f"interrupted: rerun the same command to {again}{why}{cut_note(outcome.cut)}")
+        print_note(
+            f"interrupted: rerun the same command to {again}{why}{cut_note(outcome.cut)}{outcome.unkept}"
+        )
         status = INTERRUPTED
     return status, outcome.workers

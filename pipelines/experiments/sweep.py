@@ -47,7 +47,7 @@ from pipelines.experiments.reuse import check_source, seed_from
 from pipelines.experiments.run_lines import lost_runs, split_lost, write_sweep_file
 from pipelines.experiments.sweep_config import SweepConfig
 from pipelines.experiments.sweep_folder import check_sweep_directory, sweep_lock
-from pipelines.experiments.sweep_stop import cut_note, keep_finished
+from pipelines.experiments.sweep_stop import keep_finished
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import make_scratch_root, release_scratch_root
 from pipelines.loop.interrupt import terminate_as_interrupt
@@ -71,6 +71,7 @@ class SweepOutcome:
     workers: int | None = None  # episodes the backend ran at once; None: none started, or it did not say
     interrupted: bool = False
     cut: int = 0  # at an interrupt, episodes in flight on the workers cut unrecorded (a resume runs them)
+    unkept: str = ""  # at an interrupt, the line's tail: episodes back whose writing failed (sweep_stop)
 
     @property
     def complete(self) -> bool:
@@ -316,15 +317,16 @@ def _run_tasks(
                     _fail_fast(outcome, retried, result.error, out)
         except SweepStopped as stopped:  # the backend's (a lost cluster, dying workers) or _fail_fast's
             # what the other workers finished is written first (pipelines.experiments.sweep_stop)
-            cut = cut_note(keep_finished(backend, keep))
-            raise SweepStopped(f"{stopped}{cut}", outcome.workers) from None
+            kept = keep_finished(backend, keep)
+            raise SweepStopped(f"{stopped}{kept.note()}", outcome.workers) from None
         except KeyboardInterrupt:  # Ctrl-C, SIGTERM: a stop too; a second one ends the wait at once
-            outcome.cut = keep_finished(backend, keep, functools.partial(bar.write, file=sys.stderr))
+            kept = keep_finished(backend, keep, functools.partial(bar.write, file=sys.stderr))
+            outcome.cut, outcome.unkept = kept.cut, kept.unkept
             raise
         if refusal is not None:
-            cut = cut_note(keep_finished(backend, keep))  # before the count of the episodes recorded
+            kept = keep_finished(backend, keep)  # before the count of the episodes recorded
             recorded = outcome.already_done + outcome.ran
-            raise SweepStopped(stopped_by(refusal, recorded, out) + cut, outcome.workers)
+            raise SweepStopped(stopped_by(refusal, recorded, out) + kept.note(), outcome.workers)
     finally:
         outcome.wall_s = time.perf_counter() - start
         if bar is not None:

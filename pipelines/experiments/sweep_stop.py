@@ -24,8 +24,10 @@ futures fail (`timeout 15 crowdmpc sweep --workers 2 ...`: the two episodes runn
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, Final
 
+from pipelines.errors import PipelineError
 from pipelines.experiments.worker import EpisodeOutcome
 from predictors.text_table import counted
 
@@ -34,26 +36,56 @@ from predictors.text_table import counted
 STOP_WAIT_S: Final[float] = 5.0
 
 
+@dataclass(frozen=True)
+class Kept:
+    """What a stop made of the episodes in flight: ``cut``, those running on the workers when the wait ended
+    (unrecorded); ``unkept``, the stop line's tail for those back whose writing failed ("" for none)."""
+
+    cut: int = 0
+    unkept: str = ""
+
+    def __post_init__(self) -> None:
+        if self.cut < 0:
+            raise ValueError(f"Kept.cut counts episodes: expected 0 or more, got {self.cut}")
+
+    def note(self) -> str:
+        """The stop line's tail: the episodes cut, then a failed write of those back."""
+        return cut_note(self.cut) + self.unkept
+
+
 def keep_finished(
     backend: Any, keep: Callable[[EpisodeOutcome], None], say: Callable[[str], None] | None = None
-) -> int:
-    """Write (``keep``) each outcome ``backend`` gives back within STOP_WAIT_S of a stop; the episodes cut
-    (``cut_note`` says them). Another worker's refusal (``stop``) ran nothing and is not written. ``say``:
-    told first that the wait begins, where the backend waits (an interrupt's: otherwise the user's Ctrl-C
-    met seconds of silence, and a second one, which stops at once, lost what the wait would keep)."""
+) -> Kept:
+    """Write (``keep``) each outcome ``backend`` gives back within STOP_WAIT_S of a stop; the episodes cut.
+    Another worker's refusal (``stop``) ran nothing and is not written. ``say``: told first that the wait
+    begins, where the backend waits (an interrupt's: otherwise the user's Ctrl-C met seconds of silence, and a
+    second one, which stops at once, lost what the wait would keep). A ``keep`` that raises (a full disk, a
+    backend of one's own answering for an episode it was not given) ends the writing: its error joins the
+    stop's line, which it replaced, so that the user read the failure and not why the sweep stopped."""
     finished = getattr(backend, "finished", None)
     if finished is None:  # a backend of one's own, or inline: its episode ran in the driver, cut there
-        return 0
+        return Kept()
     if say is not None:
         say(
             f"interrupted: recording the episodes the workers finish within {STOP_WAIT_S:g} s; interrupt "
             "again to stop at once"
         )
     back, cut = finished(STOP_WAIT_S)
-    for outcome in back:
-        if outcome.stop is None:
+    ran = [outcome for outcome in back if outcome.stop is None]
+    for written, outcome in enumerate(ran):
+        try:
             keep(outcome)
-    return int(cut)
+        except Exception as exc:  # a second interrupt (no Exception) still ends the stop at once
+            return Kept(int(cut), _unkept_note(len(ran) - written, exc))
+    return Kept(int(cut))
+
+
+def _unkept_note(unkept: int, exc: Exception) -> str:
+    why = str(exc) if isinstance(exc, PipelineError) else f"{type(exc).__name__}: {exc}"
+    return (
+        f"; {counted(unkept, 'episode')} the workers finished {'was' if unkept == 1 else 'were'} not "
+        f"recorded (a resume runs {'it' if unkept == 1 else 'them'}): {why}"
+    )
 
 
 def cut_note(cut: int) -> str:

@@ -199,3 +199,63 @@ def test_an_interrupt_while_an_outcome_is_written_is_held_until_its_record_is(
         keep(EpisodeOutcome(task.key, record={"key": task.key}, mcap=b"recording"))
     assert [record["key"] for record in log.load().values()] == [task.key]
     assert outcome.ran == 1
+
+
+class _StopsAnsweringForAStray:
+    """A backend of one's own that stops (``stop``: SweepStopped or an interrupt) with an episode in flight
+    and, at the stop, hands back one it was not given: writing it raises."""
+
+    name = "stray"
+    workers = 2
+
+    def __init__(self, stop: BaseException):
+        self.stop = stop
+
+    def run(self, tasks):
+        yield from ()
+        raise self.stop
+
+    def finished(self, wait_s):
+        from pipelines.experiments.worker import EpisodeOutcome
+
+        return [EpisodeOutcome("not-planned", record={"key": "not-planned"})], 1
+
+    def close(self):
+        pass
+
+
+_UNKEPT = (
+    "; 1 episode in flight on the workers was cut unrecorded (a resume runs it); 1 episode the workers "
+    "finished was not recorded (a resume runs it): stray backend returned episode 'not-planned', which it "
+    "was not given"
+)
+
+
+def test_a_write_that_fails_at_a_stop_joins_the_stop_line(tmp_path):
+    """A write of the episodes back at a stop that raised replaced the stop's line: the user read that the
+    backend answered for another episode, not that (nor why) the sweep had stopped."""
+    from pipelines.errors import SweepStopped
+    from pipelines.experiments.sweep import run_sweep
+    from tests.pipelines.test_sweep import _controllers
+
+    backend = _StopsAnsweringForAStray(SweepStopped("the Ray cluster stopped answering"))
+    with pytest.raises(SweepStopped) as stopped:
+        run_sweep(_controllers(tmp_path, 1, ["straight"]), backend_factory=lambda config, scratch: backend)
+    assert str(stopped.value) == "the Ray cluster stopped answering" + _UNKEPT
+
+
+def test_a_write_that_fails_at_an_interrupt_joins_the_interrupted_line(tmp_path, monkeypatch, capsys):
+    """The same at an interrupt: the write's error replaced the KeyboardInterrupt, so the sweep ended with
+    that error and without its "interrupted: rerun ..." line and status."""
+    import functools
+
+    from pipelines.commands.sweep_run import INTERRUPTED, run_cells
+    from pipelines.experiments import sweep
+    from tests.pipelines.test_sweep import _controllers
+
+    backend = _StopsAnsweringForAStray(KeyboardInterrupt())
+    factory = functools.partial(sweep.run_sweep, backend_factory=lambda config, scratch: backend)
+    monkeypatch.setattr(sweep, "run_sweep", factory)
+    assert run_cells(_controllers(tmp_path, 1, ["straight"]))[0] == INTERRUPTED
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == "interrupted: rerun the same command to resume" + _UNKEPT
