@@ -16,6 +16,8 @@ from collections.abc import Iterable, Iterator
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError, SweepStopped, quiet_team_warnings, warnings_as_notes
+from pipelines.experiments.pool_spawn import child_environment, children_ignore_sigint
+from pipelines.experiments.pool_stop import PoolStop, run_unless_stopped, take_part
 from pipelines.experiments.pool_tracker import start_resource_tracker
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import (
@@ -59,11 +61,14 @@ def _exit_with_parent() -> None:
     threading.Thread(target=watch, daemon=True, name="exit-with-parent").start()
 
 
-def _init_pool_worker(record: str, jit: bool, scratch_root: str | None, timeout_s: float | None) -> None:
+def _init_pool_worker(
+    record: str, jit: bool, scratch_root: str | None, timeout_s: float | None, stop: Any
+) -> None:
     import multiprocessing.util
     import signal
 
     global _WORKER
+    take_part(stop)  # the pool's PoolStop.shared
     # Ctrl-C goes to the whole process group; the driver alone handles it (and ends the workers).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _exit_with_parent()
@@ -92,7 +97,8 @@ def _load_plugins() -> None:
 
 def _run_in_pool(task: EpisodeTask) -> EpisodeOutcome:
     assert _WORKER is not None, "pool worker used before its initializer ran"
-    return _WORKER.run(task)
+    worker = _WORKER
+    return run_unless_stopped(lambda: worker.run(task))
 
 
 def _check_main_is_a_file() -> None:
@@ -125,39 +131,6 @@ def _worker_environment() -> dict[str, str]:
     from pipelines.plugins import plugin_environment
 
     return {k: os.environ.get(k, v) for k, v in SINGLE_THREAD_ENV.items()} | plugin_environment()
-
-
-@contextlib.contextmanager
-def _child_environment(values: dict[str, str]) -> Iterator[None]:
-    """Environment for processes started inside the block (spawned workers copy it at start)."""
-    saved = {k: os.environ.get(k) for k in values}
-    os.environ.update(values)
-    try:
-        yield
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-
-
-@contextlib.contextmanager
-def _children_ignore_sigint() -> Iterator[None]:
-    """Processes started inside the block ignore SIGINT from their first instruction (an ignored signal
-    stays ignored across exec): a Ctrl-C while a worker still imports (seconds, before its initializer
-    ignores it) printed that worker's KeyboardInterrupt traceback under the driver's "interrupted" line.
-    The driver ignores it too for the milliseconds a spawn takes; only the main thread may set handlers."""
-    import signal
-
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
 
 
 class ProcessBackend:
@@ -204,12 +177,14 @@ class ProcessBackend:
         from concurrent.futures.process import BrokenProcessPool
 
         self._processes: list[Any] = []  # the pool's processes, kept: their exit codes say how they died
-        with _child_environment(self._environment), _children_ignore_sigint():
+        context = multiprocessing.get_context("spawn")
+        self._stop = PoolStop(context)  # a stop's word to the workers, and their count of episodes running
+        with child_environment(self._environment), children_ignore_sigint():
             self._pool = ProcessPoolExecutor(
                 max_workers=self.workers,
-                mp_context=multiprocessing.get_context("spawn"),
+                mp_context=context,
                 initializer=_init_pool_worker,
-                initargs=self._initargs,
+                initargs=(*self._initargs, self._stop.shared),
             )
             # Start every worker now (a spawn pool starts one in each submit), while the block is in force.
             started = [self._pool.submit(os.getpid) for _ in range(self.workers)]
@@ -309,18 +284,20 @@ class ProcessBackend:
 
     def finished(self, wait_s: float) -> tuple[list[EpisodeOutcome], int]:
         """At a stop (pipelines.experiments.sweep_stop): the outcomes of the episodes handed to the pool and
-        not yielded that come back within ``wait_s`` (those ready at once first), and how many others were
-        in flight (cut: ``close`` ends them). The queued ones that no worker took are cancelled, not waited
-        for: nothing of them ran, and a worker that frees up must not start one."""
+        not yielded that come back within ``wait_s`` (those ready at once first), and how many of the others
+        the workers were running then (cut: ``close`` ends them). The queued ones are not waited for: those no
+        worker took are cancelled, and a worker that frees up starts none it takes (pool_stop): nothing of
+        them ran, and a resume runs them."""
         from concurrent.futures import wait
 
         in_flight = self._in_flight
+        self._stop.stop()
         taken = [future for future in in_flight if not future.cancel()]
         wait(taken, timeout=wait_s)
-        # a future failed by the pool (a worker died meanwhile) finished no episode: cut with the running ones
+        # a future failed by the pool (a worker died meanwhile) finished no episode; nor did one NotStarted
         back = [f.result() for f in taken if f.done() and f.exception() is None]
         in_flight.clear()
-        return back, len(taken) - len(back)
+        return back, min(self._stop.running(), len(taken) - len(back))
 
     def _lost(self, in_flight: dict[Future[EpisodeOutcome], EpisodeTask]) -> tuple[list[EpisodeOutcome], int]:
         """The outcomes of the episodes in flight when the pool broke, and how many of them finished before

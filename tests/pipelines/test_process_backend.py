@@ -21,7 +21,7 @@ def started_with(ignore: bool) -> str:
     queue = context.Queue()
     child = context.Process(target=_sigint_handler_at_start, args=(queue,))
     if ignore:
-        with process_backend._children_ignore_sigint():
+        with process_backend.children_ignore_sigint():
             child.start()
     else:
         child.start()
@@ -40,7 +40,7 @@ def test_workers_ignore_ctrl_c_from_their_start_and_the_driver_keeps_its_handler
 
 
 def test_the_pool_starts_its_workers_inside_the_block(monkeypatch):
-    real, started = process_backend._children_ignore_sigint, []
+    real, started = process_backend.children_ignore_sigint, []
     before = len(multiprocessing.active_children())
 
     @contextlib.contextmanager
@@ -49,7 +49,7 @@ def test_the_pool_starts_its_workers_inside_the_block(monkeypatch):
             yield
             started.append(len(multiprocessing.active_children()) - before)
 
-    monkeypatch.setattr(process_backend, "_children_ignore_sigint", watched)
+    monkeypatch.setattr(process_backend, "children_ignore_sigint", watched)
     backend = process_backend.ProcessBackend(2, "none")
     try:
         assert started == [2]

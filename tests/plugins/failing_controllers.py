@@ -2,7 +2,8 @@
 segfault in a library or the kernel's OOM killer would), ``RaisesOnCircles`` raises on the circle crossings
 (every other episode of a cell, on every run), ``SetInDescribe`` describes itself with a set (no JSON);
 ``RaisesIn...`` raise in one method each, ``InterruptedInAct`` is Ctrl-C in act, ``HangsOnCircles`` never
-returns from act on the circle crossings; ``InterruptsTheSweep`` sends its sweep's driver a Ctrl-C."""
+returns from act on the circle crossings; ``InterruptsTheSweep`` sends its sweep's driver a Ctrl-C
+(``InterruptsThenSleeps`` then runs a minute)."""
 
 from __future__ import annotations
 
@@ -184,5 +185,17 @@ class InterruptsTheSweepTwice(StraightLine):
         os.kill(driver, signal.SIGINT)
         time.sleep(1.0)
         os.kill(driver, signal.SIGINT)
+        time.sleep(60.0)
+        super().reset(obs)
+
+
+class InterruptsThenSleeps(StraightLine):
+    """Ctrl-C to the sweep's driver (as InterruptsTheSweep), then a minute's run: the episode a stop's wait
+    cuts, with the next one queued behind it on the same worker."""
+
+    name = "interrupts_then_sleeps"
+
+    def reset(self, obs: Observation) -> None:
+        os.kill(int(os.environ["CROWDMPC_TEST_DRIVER"]), signal.SIGINT)
         time.sleep(60.0)
         super().reset(obs)
