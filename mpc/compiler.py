@@ -18,7 +18,8 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
-from typing import IO, Final
+from types import FrameType
+from typing import IO, Any, Final
 
 COMPILER: Final[str] = "gcc"  # CasADi's "shell" compiler plugin calls it
 # -ffp-contract=off: the compiled NLP must round as CasADi's interpreter does, so that --jit changes the time
@@ -277,9 +278,11 @@ def ended_after_cleanup() -> Iterator[Check]:
     run) is noted instead, and ends the process as it would have once the block is left, its clean-up done:
     a worker a sweep's stop ended while gcc ran left the generated source (~0.5 MB) and object file in the
     cache, and gcc, running on, wrote them after its parent had gone. The yielded check raises where the
-    compile can stop (while gcc runs, ``run_compiler``; after CasADi's calls, which hold a signal). Another
-    handler (the CLI's terminate_as_interrupt, a program's) or an ignored signal is left as it is, and so is
-    every signal off the main thread, which may set no handler."""
+    compile can stop (while gcc runs, ``run_compiler``; after CasADi's calls, which hold a signal). A handler
+    with a ``holds(signum)`` (a sweep's pool worker's, which holds a process group's SIGTERM while its episode
+    runs) is asked first: while it holds the signal the compile goes on. Another handler (the CLI's
+    terminate_as_interrupt, a program's) or an ignored signal is left as it is, and so is every signal off
+    the main thread, which may set no handler."""
     noted: list[int] = []
 
     def check() -> None:
@@ -289,8 +292,18 @@ def ended_after_cleanup() -> Iterator[Check]:
     if threading.current_thread() is not threading.main_thread():
         yield check
         return
-    ending = [s for s in ENDING if signal.getsignal(s) is signal.SIG_DFL]
-    saved = {s: signal.signal(s, lambda signum, frame: noted.append(signum)) for s in ending}
+
+    def note(signum: int, frame: FrameType | None) -> None:
+        holds = getattr(saved.get(signum), "holds", None)
+        if holds is None or not holds(signum):  # a handler that holds it now: the compile goes on
+            noted.append(signum)
+
+    # a handler with ``holds`` ends the process as the default does unless it holds the signal (a sweep's
+    # pool worker holds a process group's SIGTERM while its episode runs: pipelines.experiments.pool_stop)
+    ending = [s for s in ENDING if (h := signal.getsignal(s)) is signal.SIG_DFL or hasattr(h, "holds")]
+    saved: dict[int, Any] = {}
+    for signum in ending:
+        saved[signum] = signal.signal(signum, note)
     try:
         yield check
     finally:

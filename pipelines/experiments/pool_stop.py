@@ -8,15 +8,35 @@ reaches it. The stop's line counted every task handed to the pool and not back a
 never started too (`sweep --workers 1` interrupted in its first episode: "2 episodes in flight on the workers
 were cut"), and a worker that finished within the stop's wait started the next one, to be cut. Now each worker
 counts the episodes it runs in memory the pool shares, and refuses (``NotStarted``) those it takes once the
-driver has said the pool stops."""
+driver has said the pool stops.
+
+A SIGTERM or SIGHUP sent to the sweep's whole process group (`timeout 30 crowdmpc sweep ...`, a closed
+terminal) reached the workers too, whose default action ended them at once: the episodes they ran were cut,
+where a signal to the driver alone let them finish within the stop's wait (sweep_stop) and recorded them.
+Ignoring the signals would not do: the pool's own clean-up of a broken pool ends its workers by SIGTERM and
+joins them without a bound. So a worker holds the first one while it runs an episode (``hold_stop_signals``):
+the episode goes on, and the worker starts no other; it ends at once once the driver has said it closes the
+pool (``PoolStop.close``, then SIGTERM and, past a bound, SIGKILL), at a second signal, with no episode
+running, or ``HOLD_S`` after the signal, which the driver's wait ends before. A jit compile in the episode
+goes on too: mpc.compiler.ended_after_cleanup asks the handler (its ``holds``) before it stops the compile."""
 
 from __future__ import annotations
 
+import signal
+import threading
+import time
 from collections.abc import Callable
-from typing import Any, TypeVar
+from types import FrameType
+from typing import Any, Final, TypeVar
+
+from pipelines.experiments.sweep_stop import STOP_WAIT_S
 
 _T = TypeVar("_T")
-_STOPPING, _RUNNING = 0, 1  # the shared integers: the driver's word, the episodes running
+# the shared integers: the driver's word that the pool stops, the episodes running, its word that it closes
+_STOPPING, _RUNNING, _CLOSING = 0, 1, 2
+# How long a worker holds a SIGTERM or SIGHUP while its episode runs: past the driver's wait for the episodes
+# (STOP_WAIT_S, from the same signal), so that the driver ends the pool first; the bound where it does not.
+HOLD_S: Final[float] = STOP_WAIT_S + 5.0
 
 
 class NotStarted(Exception):
@@ -27,12 +47,17 @@ class PoolStop:
     """The driver's side, one per pool: ``shared`` goes to each worker (``take_part``) as it starts."""
 
     def __init__(self, context: Any) -> None:
-        self.shared = context.Array("i", 2)  # spawned workers get it with their start (initargs)
+        self.shared = context.Array("i", 3)  # spawned workers get it with their start (initargs)
 
     def stop(self) -> None:
         """Have the workers start no episode they take from now on."""
         with self.shared.get_lock():
             self.shared.get_obj()[_STOPPING] = 1
+
+    def close(self) -> None:
+        """Have a SIGTERM or SIGHUP end each worker at once from now on, whatever it runs."""
+        with self.shared.get_lock():
+            self.shared.get_obj()[_CLOSING] = 1
 
     def running(self) -> int:
         """The episodes the workers are running now (those of a worker that died in one included)."""
@@ -41,6 +66,8 @@ class PoolStop:
 
 
 _shared: Any = None  # the worker's: its pool's PoolStop.shared
+_running = False  # the worker's: an episode runs
+_held: int | None = None  # the worker's: the signal it holds
 
 
 def take_part(shared: Any) -> None:
@@ -51,14 +78,57 @@ def take_part(shared: Any) -> None:
 
 def run_unless_stopped(run: Callable[[], _T]) -> _T:
     """``run()``, counted as running while it runs; NotStarted once the driver has said the pool stops."""
+    global _running
     assert _shared is not None, "pool worker used before its initializer ran"
+    if _held is not None:  # its episode back, the worker ends when HOLD_S is up or the driver ends it
+        while True:  # not NotStarted: a worker signalled alone would take every task the pool hands it
+            time.sleep(HOLD_S)
     with _shared.get_lock():
         counts = _shared.get_obj()
         if counts[_STOPPING]:
             raise NotStarted("the sweep stopped before this episode started")
         counts[_RUNNING] += 1
+    _running = True
     try:
         return run()
     finally:
+        _running = False
         with _shared.get_lock():
             _shared.get_obj()[_RUNNING] -= 1
+
+
+_STOP_SIGNALS: Final[tuple[signal.Signals, ...]] = tuple(
+    getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name)
+)
+
+
+def hold_stop_signals() -> None:
+    """In a pool's worker, as it starts: SIGTERM and SIGHUP, where their default action is in force (SIGHUP
+    under nohup stays ignored), are held while an episode runs (the module's docstring says how)."""
+    for signum in _STOP_SIGNALS:
+        if signal.getsignal(signum) is signal.SIG_DFL:
+            signal.signal(signum, _on_stop_signal)
+
+
+def _holds(signum: int) -> bool:
+    """Whether the worker holds ``signum`` now (the first, during an episode, the pool not closing); once it
+    does, the same signal comes again HOLD_S later, to the main thread, and ends it."""
+    global _held
+    if _held is not None or not _running or _shared is None or _shared.get_obj()[_CLOSING]:
+        return False
+    _held = signum
+    main = threading.main_thread().ident
+    if main is not None:
+        timer = threading.Timer(HOLD_S, signal.pthread_kill, (main, signum))
+        timer.daemon = True
+        timer.start()
+    return True
+
+
+def _on_stop_signal(signum: int, frame: FrameType | None) -> None:
+    if not _holds(signum):  # the default action, now: the worker ends as it was told to
+        signal.signal(signum, signal.SIG_DFL)
+        signal.raise_signal(signum)
+
+
+_on_stop_signal.holds = _holds  # type: ignore[attr-defined]  # read by mpc.compiler.ended_after_cleanup

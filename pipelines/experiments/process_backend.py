@@ -1,8 +1,9 @@
 """The process pool's backend: K spawned processes of a ``concurrent.futures`` pool run the sweep's episodes
 (pipelines.experiments.backends picks it when Ray is not installed, or for ``--backend process``).
 
-What it holds: the pool's workers (one EpisodeWorker each, ignoring Ctrl-C, exiting with a killed driver), the
-environment they start with, the resource tracker started (pool_tracker), and the break handling: a worker
+What it holds: the pool's workers (one EpisodeWorker each, ignoring Ctrl-C, holding a SIGTERM or SIGHUP while
+an episode runs (pool_stop), exiting with a killed driver), the environment they start with (pool_spawn), the
+resource tracker started (pool_tracker), and the break handling: a worker
 process that dies breaks the whole pool, each episode in flight becomes an episode error, a new pool runs the
 rest, and the sweep stops (SweepStopped) when the pool keeps breaking with nothing finishing."""
 
@@ -17,7 +18,7 @@ from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError, SweepStopped, quiet_team_warnings, warnings_as_notes
 from pipelines.experiments.pool_spawn import child_environment, children_ignore_sigint
-from pipelines.experiments.pool_stop import PoolStop, run_unless_stopped, take_part
+from pipelines.experiments.pool_stop import PoolStop, hold_stop_signals, run_unless_stopped, take_part
 from pipelines.experiments.pool_tracker import start_resource_tracker
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import (
@@ -69,6 +70,7 @@ def _init_pool_worker(
 
     global _WORKER
     take_part(stop)  # the pool's PoolStop.shared
+    hold_stop_signals()  # a SIGTERM or SIGHUP to the sweep's process group: the episode running goes on
     # Ctrl-C goes to the whole process group; the driver alone handles it (and ends the workers).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _exit_with_parent()
@@ -357,6 +359,7 @@ class ProcessBackend:
         # Cancel what has not started, end the running episodes (never written: a rerun runs them) now; idle,
         # the workers get ``grace_s`` to exit of themselves, closing their controllers (_init_pool_worker).
         self._note_processes()
+        self._stop.close()  # a SIGTERM now ends a worker at once, whatever it holds (pool_stop)
         self._pool.shutdown(wait=False, cancel_futures=True)
         try:
             deadline = time.monotonic() + grace_s
@@ -368,3 +371,7 @@ class ProcessBackend:
                     process.terminate()
         for process in self._processes:
             process.join(timeout=5)
+        for process in self._processes:  # one that takes no signal (C code that does not return): for sure
+            if process.is_alive():
+                process.kill()
+                process.join(timeout=5)

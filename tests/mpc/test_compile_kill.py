@@ -130,3 +130,38 @@ def test_a_child_whose_parent_is_gone_before_it_asked_exits_instead_of_running_o
     assert subprocess.run(["/bin/sh", "-c", "exit 0"], preexec_fn=orphaned, check=False).returncode == 1
     ours = compiler.ends_with_this_process()
     assert subprocess.run(["/bin/sh", "-c", "exit 0"], preexec_fn=ours, check=False).returncode == 0
+
+
+def test_a_handler_that_holds_the_signal_is_asked_before_the_compile_stops():
+    """A sweep's pool worker holds a SIGTERM sent to the sweep's process group while its episode runs
+    (pipelines.experiments.pool_stop): the episode's compile goes on while the handler holds it, and stops,
+    its files removed, at the one it does not hold; ended_after_cleanup took over the default action
+    alone."""
+    from mpc.compiler import ended_after_cleanup
+
+    held: list[int] = []
+    ended: list[int] = []  # where the worker's handler would end the process (the default action)
+
+    def holds(signum: int) -> bool:  # the first only
+        if held:
+            return False
+        held.append(signum)
+        return True
+
+    def worker_handler(signum, frame):
+        if not holds(signum):
+            ended.append(signum)
+
+    worker_handler.holds = holds
+    previous = signal.signal(signal.SIGTERM, worker_handler)
+    try:
+        with pytest.raises(BaseException) as stopped, ended_after_cleanup() as check:
+            signal.raise_signal(signal.SIGTERM)
+            check()  # held: the compile goes on
+            assert held == [signal.SIGTERM]
+            signal.raise_signal(signal.SIGTERM)
+            check()
+        assert type(stopped.value).__name__ == "_Ended"  # unwound to the compile's clean-up
+        assert ended == [signal.SIGTERM]  # and then ended as it was told to
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -282,3 +282,47 @@ def test_a_stop_counts_as_cut_only_the_episodes_that_were_running(
     ) in err
     log = tmp_path / EPISODES_FILE
     assert not log.exists() or not log.read_text()
+
+
+@pytest.mark.parametrize(("sent", "status"), [("TERM", 143), ("HUP", 129)])
+def test_a_signal_to_the_sweeps_process_group_lets_the_workers_finish(sent, status, tmp_path):
+    """`timeout 30 crowdmpc sweep ...` or a closed terminal signals every process of the sweep's group: the
+    process pool's workers, whose default action ended them at once, cut the episodes they ran, where a
+    signal to the driver alone let them finish within the stop's wait. Now both episodes are recorded, the
+    minute's episode queued behind them never starts, and the sweep ends in the wait's bound."""
+    import subprocess
+    import sys
+
+    marks = tmp_path / "marks"
+    marks.mkdir()
+    out = tmp_path / "out"
+    names = ("MarksThenTakesThreeSeconds", "MarksThenTakesThreeSecondsToo", "SleepsInReset")
+    controllers = [f"tests.plugins.failing_controllers:{name}" for name in names]
+    env = os.environ | {"CROWDMPC_TEST_MARKS": str(marks), "CROWDMPC_CONTROLLERS": ",".join(controllers)}
+    argv = _sweep(out, controllers, "process")
+    start = time.monotonic()
+    sweep = subprocess.Popen(
+        [sys.executable, "-m", "pipelines.cli", *argv],
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # a process group of its own, as a terminal's job has
+    )
+    try:
+        while len(list(marks.iterdir())) < 2 and time.monotonic() - start < 120:
+            assert sweep.poll() is None, sweep.stderr.read() if sweep.stderr else ""
+            time.sleep(0.05)
+        os.killpg(sweep.pid, signal.Signals["SIG" + sent])
+        _, err = sweep.communicate(timeout=60)
+    finally:
+        if sweep.poll() is None:
+            os.killpg(sweep.pid, signal.SIGKILL)
+            sweep.wait()
+    assert sweep.returncode == status, err
+    assert time.monotonic() - start < 120  # not the minute's episodes
+    records = EpisodeLog(out / EPISODES_FILE).load()
+    assert sorted(r["controller"] for r in records.values()) == [
+        "marks_then_takes_three_seconds",
+        "marks_then_takes_three_seconds_too",
+    ], err
+    assert "interrupted: rerun the same command to resume" in err.splitlines(), err

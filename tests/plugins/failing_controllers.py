@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import signal
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -199,3 +200,22 @@ class InterruptsThenSleeps(StraightLine):
         os.kill(int(os.environ["CROWDMPC_TEST_DRIVER"]), signal.SIGINT)
         time.sleep(60.0)
         super().reset(obs)
+
+
+class MarksThenTakesThreeSeconds(StraightLine):
+    """Leaves a file in ``$CROWDMPC_TEST_MARKS`` as its episode starts (a test then signals the sweep), then
+    takes three seconds more: an episode back within a stop's wait."""
+
+    name = "marks_then_takes_three_seconds"
+
+    def reset(self, obs: Observation) -> None:
+        marks = os.environ["CROWDMPC_TEST_MARKS"]
+        Path(marks, f"{os.getpid()}-{time.monotonic_ns()}").touch()
+        time.sleep(3.0)
+        super().reset(obs)
+
+
+class MarksThenTakesThreeSecondsToo(MarksThenTakesThreeSeconds):
+    """Another controller of the same: a sweep runs each cell's first episode before any second one."""
+
+    name = "marks_then_takes_three_seconds_too"
