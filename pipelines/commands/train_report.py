@@ -115,35 +115,44 @@ def print_summary(summary: dict[str, Any], best: str, weights: Path, top_k: int 
         if "topk_ade" in m:
             line += f"  top-{top_k} ADE {m['topk_ade']:.3f}  FDE {m['topk_fde']:.3f}"
         print(line)
+    add = f"crowdmpc {_plugin_option(summary['model'])}zoo add {shlex.quote(str(weights))}"
+    name_option, held = _name_option(weights.stem)
+    # a retrained model's name is often its zoo entry's already: say how to replace that entry, on purpose
+    replace = f" (your zoo holds {held} already: `{add} --replace` replaces that entry)" if held else ""
     print(
         f"  median epoch time {summary['training']['median_epoch_time_s']} s; add to the zoo with "
-        f"`crowdmpc {_plugin_option(summary['model'])}zoo add {shlex.quote(str(weights))}"
-        f"{_name_option(weights.stem)}`"
+        f"`{add}{name_option}`{replace}"
     )
 
 
-def _name_option(name: str) -> str:
-    """`` --name my_NAME`` when ``zoo add`` would refuse the checkpoint's own name ``NAME`` (the default
-    ``--out`` names a model as the shipped one of its kind and protocol: social_lstm_eth), else nothing. The
-    rule is ``zoo_edit.user_name_refusal``'s; a shipped manifest that does not read leaves the hint as it is
-    (``zoo add`` says what is wrong with it). The name suggested is none the user zoo has either (a second
-    run's hint named the first's, which ``zoo add`` then refused)."""
+def _name_option(name: str) -> tuple[str, str | None]:
+    """`` --name FREE`` when ``zoo add`` would refuse the checkpoint's own name ``NAME``, else nothing; and
+    the user zoo's entry of that name (in any case), else None. A shipped or built-in name (the default
+    ``--out`` names a model as the shipped one of its kind and protocol: social_lstm_eth) suggests
+    ``my_NAME``, the rule being ``zoo_edit.user_name_refusal``'s; a name the user zoo holds (a model trained
+    again, or resumed, under its entry's name) ``NAME_2``, where the bare command was refused. The name
+    suggested is none the user zoo has either (a second run's hint named the first's, which ``zoo add`` then
+    refused). A manifest that does not read leaves the hint as it is (``zoo add`` says what is wrong)."""
     from predictors.errors import PredictorError
     from predictors.zoo import user_zoo_dir, zoo_names
     from predictors.zoo_edit import user_name_refusal
 
     try:
-        if user_name_refusal(name) is None:
-            return ""
-        taken = {held.lower() for held in zoo_names(user_zoo_dir())}
+        held = {entry.lower(): entry for entry in zoo_names(user_zoo_dir())}
+        taken = user_name_refusal(name) is not None
+        if not taken and name.lower() not in held:
+            return "", None
+        stem = f"my_{name}" if taken else name
         free = next(
             candidate
-            for candidate in itertools.chain([f"my_{name}"], (f"my_{name}_{i}" for i in itertools.count(2)))
-            if user_name_refusal(candidate) is None and candidate.lower() not in taken
+            for candidate in itertools.chain(
+                [stem] if taken else [], (f"{stem}_{i}" for i in itertools.count(2))
+            )
+            if user_name_refusal(candidate) is None and candidate.lower() not in held
         )
     except PredictorError:
-        return ""
-    return f" --name {free}"
+        return "", None
+    return f" --name {free}", None if taken else held[name.lower()]
 
 
 def epoch_times_from_csv(log_dir: str | Path) -> list[float]:

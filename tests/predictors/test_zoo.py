@@ -212,6 +212,40 @@ def test_trains_zoo_hint_is_a_command_zoo_add_takes(shipped, user, pair, capsys)
     assert capsys.readouterr().out.split("`")[1] == f"crowdmpc zoo add {mine}"
 
 
+def test_trains_zoo_hint_for_a_name_the_user_zoo_holds_is_a_command_zoo_add_takes(
+    shipped, user, pair, capsys
+):
+    """A model trained again (or resumed) under the name its user zoo entry has: the hint was the bare `zoo
+    add OUT/mine.pt`, which `zoo add` refused (the zoo has 'mine'). It names a free --name now, and says how
+    to replace the entry on purpose (--replace), each a command `zoo add` takes."""
+    import shlex
+
+    from pipelines.commands.train_report import print_summary
+
+    for suffix in (".pt", ".json", ".metrics.json"):
+        shutil.copyfile(pair.with_name(f"{NAME}{suffix}"), pair.with_name(f"mine{suffix}"))
+    mine = pair.with_name("mine.pt")
+    assert cli(["zoo", "add", str(mine)], capsys)[0] == 0
+    summary = {
+        "name": "mine",
+        "model": "social_lstm",
+        "metrics": {},
+        "training": {"median_epoch_time_s": 1.0},
+    }
+    capsys.readouterr()
+    print_summary(summary, "best.ckpt", mine, None)
+    hint = capsys.readouterr().out
+    add, replace = hint.split("`")[1], hint.split("`")[3]
+    assert add == f"crowdmpc zoo add {mine} --name mine_2"
+    assert replace == f"crowdmpc zoo add {mine} --replace" and "your zoo holds mine already" in hint
+    code, out, err = cli(shlex.split(replace)[1:], capsys)
+    assert code == 0 and "nothing changed" in out, err  # the same weights: a no-op, not a refusal
+    code, out, err = cli(shlex.split(add)[1:], capsys)
+    assert code == 0 and "added mine_2 " in out, err
+    print_summary(summary, "best.ckpt", mine, None)  # mine_2 is the zoo's now
+    assert capsys.readouterr().out.split("`")[1] == f"crowdmpc zoo add {mine} --name mine_3"
+
+
 @pytest.mark.parametrize("where", ["env", "env_inside", "env_symlink", "dir_option"])
 def test_the_shipped_zoo_is_read_only(tmp_path, shipped, pair, monkeypatch, capsys, where):
     before = snapshot(shipped)
