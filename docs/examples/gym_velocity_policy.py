@@ -8,13 +8,14 @@ BIWI crowds, e.g. ``eth_test`` (real people, read from ``$CROWDMPC_DATA``), wher
 only while tracked: the policy reads the ``present`` column, so it runs among either unchanged.
 """
 
-import sys
+import argparse
 
 import numpy as np
 
 from crowdsim.env_config import EnvConfig
 from crowdsim.gym_env import GOAL, POSITION, PRESENT
 from crowdsim.gym_wrappers import VelocityControl
+from crowdsim.replay import CROWDS
 from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.loop.gym_loop import ObserveEpisodes, make_env
 
@@ -53,4 +54,15 @@ def main(
 
 
 if __name__ == "__main__":
-    main(*(int(a) if a.isdigit() else a for a in sys.argv[1:4]))  # type: ignore[arg-type]
+    # argparse: a mistyped argument ends in one line naming it (an OUT_DIR given alone was taken for
+    # EPISODES, a TypeError from range)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("episodes", nargs="?", type=int, default=3, metavar="EPISODES", help="seeds 0.. (3)")
+    parser.add_argument(
+        "out_dir", nargs="?", default="runs/gym_velocity_policy", metavar="OUT_DIR", help="%(default)s"
+    )
+    parser.add_argument(
+        "crowd", nargs="?", default="orca", choices=CROWDS, metavar="CROWD", help="orca, eth_test ..."
+    )
+    args = parser.parse_args()
+    main(args.episodes, args.out_dir, args.crowd)

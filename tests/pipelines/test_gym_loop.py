@@ -213,6 +213,32 @@ def test_the_docs_example_runs_and_records(tmp_path, capsys):
     ]
 
 
+@pytest.mark.parametrize(
+    ("argv", "named"),
+    [
+        (["runs/g"], "argument EPISODES: invalid int value: 'runs/g'"),
+        (["1", "runs/g", "eth_tset"], "'eth_tset'"),
+    ],
+)
+def test_the_docs_examples_command_line_refuses_a_bad_argument_in_one_line(
+    tmp_path, monkeypatch, capsys, argv, named
+):
+    """`python docs/examples/gym_velocity_policy.py runs/g` (OUT_DIR alone) ended in a TypeError traceback
+    from range('runs/g'), a mistyped CROWD in EnvConfig's; argparse names the argument now, exit 2."""
+    import runpy
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("sys.argv", [str(EXAMPLE), *argv])
+    with pytest.raises(SystemExit) as stopped:
+        runpy.run_path(str(EXAMPLE), run_name="__main__")
+    err = capsys.readouterr().err
+    assert stopped.value.code == 2 and named in err and "Traceback" not in err
+    assert not (tmp_path / "runs").exists()
+    monkeypatch.setattr("sys.argv", [str(EXAMPLE), "1", "runs/g"])  # the documented form still runs
+    runpy.run_path(str(EXAMPLE), run_name="__main__")
+    assert capsys.readouterr().out.splitlines()[-1] == "wrote 1 MCAP files to runs/g"
+
+
 def test_an_episode_ended_by_gymnasiums_time_limit_is_recorded_whole(tmp_path):
     """gym.make's max_episode_steps wraps the environment in TimeLimit, which truncates before the environment
     ends the episode itself, so the last info has no episode_metrics: the record takes the metrics of the
