@@ -120,6 +120,8 @@ class OneLineParser(argparse.ArgumentParser):
         ):
             # `crowdmpc evaluate --plugin m:C ...`: an option of crowdmpc itself, given after the command (a
             # --model naming the plugin was refused first, as not registered, without the hint)
+            if message.startswith("unrecognized arguments:"):
+                message = _plugin_as_given(message, OneLineParser.given)
             message += " (--plugin goes before COMMAND: crowdmpc --plugin MODULE:CLASS COMMAND ...)"
         prog = self.prog
         if message.startswith("unrecognized arguments:") and "--plugin goes" not in message:
@@ -149,6 +151,18 @@ def _command_run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> l
             if name in action.choices:
                 return [name, *_command_run(action.choices[name], args)]
     return []
+
+
+def _plugin_as_given(message: str, given: list[str]) -> str:
+    """argparse's "unrecognized arguments: --plugin X" with X the value given after the last --plugin (one
+    before the command was taken): before a command's positional argument (`export --plugin m:C NAME`) that
+    positional took m:C, and the line named NAME as --plugin's value."""
+    words = message.split(" ")
+    at = len(given) - 1 - given[::-1].index("--plugin") if "--plugin" in given else len(given)
+    if "--plugin" not in words[:-1] or at + 1 >= len(given):
+        return message
+    words[words.index("--plugin") + 1] = given[at + 1]
+    return " ".join(words)
 
 
 def _plugin_after_command(prog: str, given: list[str]) -> bool:

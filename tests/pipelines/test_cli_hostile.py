@@ -163,6 +163,18 @@ def test_plugin_after_the_command_says_where_it_goes(capsys):
     assert "(--plugin goes before COMMAND: crowdmpc --plugin MODULE:CLASS COMMAND ...)" in err
 
 
+def test_plugin_after_the_command_before_its_argument_is_named_as_given(capsys):
+    """`crowdmpc export --plugin m:C NAME`: argparse gave m:C to export's NAME and refused "--plugin NAME",
+    naming the predictor as the plugin the user typed. The line names --plugin's value as given."""
+    with pytest.raises(SystemExit) as done:
+        main(["export", "--plugin", "mymod:MyNet", "social_lstm_eth", "--out", "x.casadi"])
+    assert done.value.code == 2
+    assert capsys.readouterr().err == (
+        "crowdmpc: error: unrecognized arguments: --plugin mymod:MyNet (--plugin goes before COMMAND: "
+        "crowdmpc --plugin MODULE:CLASS COMMAND ...); see 'crowdmpc --help'\n"
+    )
+
+
 # ----------------------------------------------------------------------------------------------------------
 # 2. Output paths: checked before any work
 # ----------------------------------------------------------------------------------------------------------
