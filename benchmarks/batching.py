@@ -160,6 +160,7 @@ def main(argv: list[str] | None = None) -> int:
         import torch
 
         from predictors.data.batching import BUCKET_BATCHES
+        from predictors.text_table import counted
 
         torch.set_num_threads(1)
         runs = [Run("shuffled", files, args, None)]
@@ -168,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"{args.model} training epochs on {runs[0].scenes} scenes ({source}), batch {args.batch_size}, "
             f"by_size chunks of {BUCKET_BATCHES} batches unless k= says; 1 torch thread; "
-            f"{args.epochs} interleaved epochs each"
+            f"{counted(args.epochs, 'interleaved epoch')} each"
         )
         print(
             f"{'batching':<14} | {'batches':>7} {'slots':>7} {'agents':>7} {'padding':>8} | "

@@ -102,6 +102,7 @@ def payback(episodes: int, cache_root: Path) -> None:
     from mpc.nlp import JointNLP, LocalNLP
     from pipelines.loop.controllers import ControllerSpec, make_controller
     from pipelines.loop.episode import run_episode
+    from predictors.text_table import counted
 
     os.environ[compile_cache.CACHE_ENV] = str(cache_root)  # empty: the first build compiles
     for controller, nlp in (("cmpc", JointNLP), ("dmpc", LocalNLP)):
@@ -122,12 +123,15 @@ def payback(episodes: int, cache_root: Path) -> None:
         saving = cpu[False] - cpu[True]
         kind = "joint" if controller == "cmpc" else "local"
         # whole episodes: 2.87 s of compile at 0.255 s saved an episode is repaid by the twelfth, not the 11th
-        repays = f"{math.ceil(build_cpu[0] / saving)}" if saving > 0 else "never"
+        if saving > 0:
+            repaid = f"a compile repaid after {counted(math.ceil(build_cpu[0] / saving), 'episode')}"
+        else:
+            repaid = "a compile never repaid"
         print(
             f"{controller} ({kind} NLP, 7 humans): compile {builds[0]:.2f} s wall, {build_cpu[0]:.2f} s CPU "
             f"(gcc included), warm load "
             f"{builds[1] * 1e3:.0f} ms; CPU per episode {cpu[False]:.3f} s without jit, {cpu[True]:.3f} s "
-            f"with: saves {saving:.3f} s, a compile repaid after {repays} episodes "
+            f"with: saves {saving:.3f} s, {repaid} "
             f"(auto assumes {compile_cache.COMPILE_S[kind]} s and {compile_cache.SAVING_PER_EPISODE_S[kind]} "
             f"s); load {os.getloadavg()[0]:.2f}",
             flush=True,
@@ -156,6 +160,7 @@ def main() -> int:
     with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
         sys.path.insert(0, str(ROOT))
         from mpc import cache_admin, compile_cache
+        from predictors.text_table import counted
 
         with tempfile.TemporaryDirectory(prefix="compile-cache-bench-") as tmp:
             env = os.environ | {compile_cache.CACHE_ENV: str(Path(tmp) / "cache")}
@@ -164,13 +169,15 @@ def main() -> int:
                 runs[label] = run_sweep(Path(tmp) / label, jit, args.episodes_per_cell, args.predictors, env)
                 r = runs[label]
                 print(
-                    f"{label:>4} (--jit {jit:>3}): {r['wall_s']:6.1f} s wall, {r['episodes']} episodes using "
+                    f"{label:>4} (--jit {jit:>3}): {r['wall_s']:6.1f} s wall, "
+                    f"{counted(r['episodes'], 'episode')} using "
                     f"{r['episode_cpu_s']:5.1f} s CPU; load {r['load_before'][0]:.2f} before, "
                     f"{r['load_after'][0]:.2f} after",
                     flush=True,
                 )
             stats = cache_admin.info(Path(tmp) / "cache" / compile_cache.SUBDIR)
-            print(f"cache: {stats.entries} entries, {stats.size_bytes / 1024:.0f} KiB; {stats.compiler}")
+            entries = f"{stats.entries} {'entry' if stats.entries == 1 else 'entries'}"
+            print(f"cache: {entries}, {stats.size_bytes / 1024:.0f} KiB; {stats.compiler}")
             base = runs["off"]["metrics"]
             for label in ("cold", "warm"):
                 same = sum(runs[label]["metrics"].get(k) == m for k, m in base.items())

@@ -47,7 +47,8 @@ def print_report(
                 f"phase x{speedup['phase']:.2f}, same trajectories: {cell['same']}"
             )
             if cell["cut"]:
-                line += f" (in {cell['cut']} of {args.episodes} episodes up to a step past the time limit)"
+                of = counted(args.episodes, "episode")
+                line += f" (in {cell['cut']} of {of} up to a step past the time limit)"
             if "replay" in cell:
                 rp = cell["replay"]
                 cut = f", {rp['cut']} solves past the time limit not compared" if rp["cut"] else ""

@@ -23,6 +23,7 @@ from typing import Any, NamedTuple, cast
 from pipelines.commands import check_writable
 from pipelines.commands.output_paths import without_missing_parents
 from pipelines.errors import PipelineError
+from predictors.text_table import counted
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import check_input_files, check_not_input, run_main  # noqa: E402
@@ -233,7 +234,7 @@ def main(argv: list[str] | None = None) -> int:
         raise PipelineError(str(exc)) from None
     plot(pts, args.out)
     alone = undrawn(pts)
-    print(f"wrote {args.out} ({len(pts) - len(alone)} of {len(pts)} rows drawn)")
+    print(f"wrote {args.out} ({len(pts) - len(alone)} of {counted(len(pts), 'row')} drawn)")
     for p in alone:
         print(
             f"  not drawn (no row to make a line with): {p.controller} {p.goals} goals, M={p.robots}, "

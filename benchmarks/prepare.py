@@ -71,8 +71,9 @@ def prepare_once(controller: str, predictor: str, robots: int, humans: list[int]
 def print_run(label: str, run: dict) -> None:
     sizes = run["seconds"]
     held = "" if run["rss_mb"] is None else f", {run['rss_mb']:+.0f} MB resident"
-    print(f"{label}: {run['total_s']:.2f} s for {len(sizes)} sizes{held} (load {run['load'][0]:.2f} -> "
-          f"{run['load'][1]:.2f})")  # fmt: skip
+    built = counted(len(sizes), "size")
+    load = f"(load {run['load'][0]:.2f} -> {run['load'][1]:.2f})"
+    print(f"{label}: {run['total_s']:.2f} s for {built}{held} {load}")
     print("  humans  " + " ".join(f"{n:>6}" for n in sizes))
     print("  s       " + " ".join(f"{s:>6.2f}" for s in sizes.values()))
 

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from crowdsim.replay import CROWDS
+from predictors.text_table import counted
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
@@ -199,9 +200,9 @@ def print_report(report: dict[str, Any], horizon: int) -> None:
     )
     for crowd, measured in report["crowds"].items():
         print(
-            f"{crowd}: {measured['episodes']} episodes, {measured['success']} successes, "
-            f"{measured['collision']} with a collision; {measured['scored_at_k1']} scores at k = 1 (a human "
-            "at a step)"
+            f"{crowd}: {counted(measured['episodes'], 'episode')}, {measured['success']} "
+            f"success{'es' * (measured['success'] != 1)}, {measured['collision']} with a collision; "
+            f"{counted(measured['scored_at_k1'], 'score')} at k = 1 (a human at a step)"
         )
         for margins, shares in measured["coverage"].items():
             print(f"  {margins:28s}" + " ".join(figure(share, "6.3f") for share in shares))

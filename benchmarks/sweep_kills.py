@@ -27,6 +27,7 @@ from pathlib import Path
 
 from pipelines.errors import PipelineError
 from pipelines.experiments.cells import EXPERIMENTS
+from predictors.text_table import counted
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import count_in, predictor_name, run_main  # noqa: E402
@@ -84,7 +85,7 @@ def main() -> int:
             time.sleep(delay)
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
-            print(f"kill {k + 1:2d} after {delay:.2f} s: {len(records(out))} records")
+            print(f"kill {k + 1:2d} after {delay:.2f} s: {counted(len(records(out)), 'record')}")
         done = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
         if done.returncode != 0:  # the sweep's own words: what a "no sweep.json" below would have hidden
             said = "\n".join(done.stderr.strip().splitlines()[-20:])

@@ -33,7 +33,7 @@ def test_the_memory_the_sizes_hold_is_reported(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(sys, "argv", ["prepare.py", *argv, "--json", str(out)])
     prepare.main()
     assert json.loads(out.read_text())["no_jit"]["rss_mb"] == 30.5
-    assert "for 1 sizes, +30 MB resident (load" in capsys.readouterr().out
+    assert "for 1 size, +30 MB resident (load" in capsys.readouterr().out
 
 
 def test_resident_memory_is_read_from_proc_where_there_is_one():
