@@ -178,7 +178,7 @@ def _job_runtime_env() -> dict[str, Any] | None:
     where its job config is no JSON object this code knows (Ray's to read, as it does)."""
     try:
         job = json.loads(os.environ.get(RAY_JOB_CONFIG_ENV) or "{}").get("runtime_env") or {}
-    except (ValueError, AttributeError):
+    except (ValueError, AttributeError, RecursionError):  # nested past json's stack: no config of ours
         return None
     return job if isinstance(job, dict) else None
 
