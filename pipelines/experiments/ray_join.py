@@ -18,6 +18,7 @@ from typing import Any, Final
 
 from pipelines.errors import PipelineError, print_note
 from pipelines.experiments.ray_stderr import repeats_said_once
+from predictors.errors import short_repr
 
 JOIN_PROBE_S: Final[float] = 10.0  # a cluster's head answers a connection at once; a firewall drops it
 JOIN_NOTE_S: Final[float] = 30.0
@@ -133,8 +134,10 @@ def left_to_the_job(env_vars: dict[str, str]) -> dict[str, str]:
         job_vars = {str(k): str(v) for k, v in (job.get("env_vars") or {}).items()} if job else {}
     except AttributeError:  # not a job config this code knows: Ray's to read, as it does
         return env_vars
-    differ = [
-        f"{k}={job_vars[k]!r} (the sweep's: {v!r})" for k, v in env_vars.items() if job_vars.get(k, v) != v
+    differ = [  # cut: a job's value may be any length, and the line names it beside the sweep's
+        f"{k}={short_repr(job_vars[k])} (the sweep's: {short_repr(v)})"
+        for k, v in env_vars.items()
+        if job_vars.get(k, v) != v
     ]
     if differ:
         raise PipelineError(

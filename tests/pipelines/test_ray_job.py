@@ -85,3 +85,17 @@ def test_a_job_config_nested_past_the_stack_is_left_to_ray(tmp_path, monkeypatch
     monkeypatch.setenv("RAY_JOB_CONFIG_JSON_ENV_VAR", "[" * 100_000)
     assert left_to_the_job({"CROWDMPC_DATA": "/d"}) == {"CROWDMPC_DATA": "/d"}
     assert main([*SWEEP, "--out", str(tmp_path / "s1"), "--dry-run", "--no-progress"]) == 0
+
+
+def test_a_jobs_long_variable_is_named_cut(monkeypatch):
+    """A job whose runtime_env set CROWDMPC_DATA to 100,000 characters other than the sweep's was refused in a
+    line of 100,242 characters, the value whole: each value is now cut as other refusals cut one."""
+    from pipelines.errors import PipelineError
+    from pipelines.experiments.ray_join import left_to_the_job
+
+    job = {"runtime_env": {"env_vars": {"CROWDMPC_DATA": "x" * 100_000}}}
+    monkeypatch.setenv("RAY_JOB_CONFIG_JSON_ENV_VAR", json.dumps(job))
+    with pytest.raises(PipelineError) as refused:
+        left_to_the_job({"CROWDMPC_DATA": "/d"})
+    said = str(refused.value)
+    assert len(said) < 400 and "CROWDMPC_DATA='xxx" in said and "(the sweep's: '/d')" in said
