@@ -27,6 +27,12 @@ MOST_STEP_TIME: Final[float] = 3600.0  # s, time_limit_s (1 s by default): an ho
 # a nanosecond, the resolution of the clock the steps measure it with (time.perf_counter); 5e-324 passed
 # "> 0" and is no time that clock or IPOPT's max_wall_time tells from 1e-9, the tests' budget cut at once.
 LEAST_STEP_TIME: Final[float] = 1e-9
+# The team an NLP is built for (``check_team``): crowdsim runs at most 12 robots among 50 humans. The joint
+# NLP's pairs grow as the square of the robots (50 took 6 s to build, 1000 would take hours) and its
+# constraints as the humans (100,000 among 3 robots took a minute): past these a count is a typo, which
+# CasADi met with std::bad_alloc (10**12 humans) or its overloads of SX.sym (10**30 robots).
+MOST_TEAM_ROBOTS: Final[int] = 1000
+MOST_TEAM_HUMANS: Final[int] = 100_000
 # The counts: field -> (least, most)
 COUNTS: Final[dict[str, tuple[int, int]]] = {
     "horizon": (1, MAX_HORIZON),
@@ -53,10 +59,15 @@ def check_step_time(seconds: float) -> None:
 
 def check_team(n_robots: Any, n_humans: Any, least_robots: int = 0) -> tuple[int, int]:
     """The team an NLP is built for as plain ints (numpy's too), ``n_robots`` >= ``least_robots`` and
-    ``n_humans`` >= 0, else a ValueError naming the one that is not: CasADi refused them in its own words
-    ("Dimensions must be non-negative, got -8-by-1", or its overloads of ``SX.sym`` for 2.5 robots)."""
+    ``n_humans`` >= 0, each at most its ``MOST_TEAM_*``, else a ValueError naming the one that is not: CasADi
+    refused them in its own words ("Dimensions must be non-negative, got -8-by-1", or its overloads of
+    ``SX.sym`` for 2.5 robots)."""
     counts = []
-    for name, value, least in (("n_robots", n_robots, least_robots), ("n_humans", n_humans, 0)):
+    team = (
+        ("n_robots", n_robots, least_robots, MOST_TEAM_ROBOTS),
+        ("n_humans", n_humans, 0, MOST_TEAM_HUMANS),
+    )
+    for name, value, least, most in team:
         try:
             count = None if isinstance(value, bool) else operator.index(value)
         except TypeError:
@@ -64,5 +75,7 @@ def check_team(n_robots: Any, n_humans: Any, least_robots: int = 0) -> tuple[int
         if count is None or count < least:
             why = " (a local NLP is one robot's)" if name == "n_robots" and least > 0 else ""
             raise ValueError(f"{name} must be an integer >= {least}{why}, got {value!r}")
+        if count > most:
+            raise ValueError(f"{name} must be an integer in [{least}, {most}], got {value!r}")
         counts.append(count)
     return counts[0], counts[1]

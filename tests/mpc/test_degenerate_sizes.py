@@ -99,3 +99,15 @@ def test_numpy_counts_still_build():
     """Sizes from numpy (a sweep over np.arange) built before and still do, as plain ints."""
     nlp = JointNLP(MPCConfig(), np.int64(2), np.int64(1))
     assert (nlp.n_robots, nlp.n_humans) == (2, 1) and type(nlp.n_robots) is int
+
+
+@pytest.mark.parametrize("solver", [JointNLP, LocalNLP, CMPC, DMPC])
+@pytest.mark.parametrize(
+    ("n_robots", "n_humans", "named"),
+    [(10**30, 2, "n_robots"), (2, 10**12, "n_humans"), (1001, 2, "n_robots"), (2, 100_001, "n_humans")],
+)
+def test_a_team_past_any_nlp_is_refused_by_name(solver, n_robots, n_humans, named):
+    """10**30 robots met CasADi's overloads of SX.sym, 10**12 humans std::bad_alloc, and a few zeros fewer
+    built for minutes to hours before anything said so."""
+    with pytest.raises(ValueError, match=rf"^{named} must be an integer in \[[01], "):
+        solver(MPCConfig(), n_robots, n_humans)
