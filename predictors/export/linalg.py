@@ -249,7 +249,8 @@ def matmul(a, b):
     blocks = [
         ca.mtimes(x.m[i * n : (i + 1) * n, :], y.m[i * k : (i + 1) * k, :]) for i in range(math.prod(batch))
     ]
-    return SymTensor(ca.vertcat(*blocks), batch + (n, p))
+    # no blocks for a batch of none: vertcat of nothing is 0-by-1, not the 0-by-p of the empty result
+    return SymTensor(ca.vertcat(*blocks) if blocks else type(x.m)(0, p), batch + (n, p))
 
 
 def einsum(equation: str, *operands):

@@ -259,3 +259,26 @@ def test_what_torch_refuses_is_refused_in_one_line_naming_the_argument(call, mes
 
 def _export_refused(module: nn.Module, x: torch.Tensor) -> None:
     export_function(module, module.forward, [TensorSpec("x", tuple(x.shape))], ["y"], "f")
+
+
+EMPTY_BATCH = {
+    "matmul": lambda m, x: x @ x.transpose(-1, -2),
+    "sdpa": lambda m, x: torch.nn.functional.scaled_dot_product_attention(x, x, x),
+    "mha": lambda m, x: m.a(x, x, x, need_weights=False)[0],
+    "mha_weights": lambda m, x: m.a(x, x, x)[1],
+}
+
+
+@pytest.mark.parametrize("symbol", [ca.MX, ca.SX], ids=["MX", "SX"])
+@pytest.mark.parametrize("name", sorted(EMPTY_BATCH))
+def test_attention_over_a_batch_of_none_exports_as_torch_runs_it(name, symbol):
+    """A batch of 0 (a net attending over the humans of a crowd of none) ended its export in "AssertionError:
+    matrix (0, 1) does not hold a tensor of shape (0, 3, 3)", a traceback past ExportError: a batched
+    matmul of no blocks was vertcat's 0-by-1. Torch gives an empty result of its shape, as the export now."""
+    torch.manual_seed(0)
+    module = Wrap(EMPTY_BATCH[name], a=nn.MultiheadAttention(4, 2, batch_first=True)).double()
+    spec = TensorSpec("x", (0, 3, 4))
+    function = export_function(module, module.forward, [spec], ["y"], "f", symbol=symbol)
+    with torch.no_grad():
+        expected = module(torch.zeros(0, 3, 4, dtype=torch.float64))
+    assert expected.numel() == 0 and function.size_out(0) == (0, 1)
