@@ -17,7 +17,7 @@ from pipelines.commands.review_notes import (
     warn_mixed_code,
     warn_repeats,
 )
-from pipelines.errors import PipelineError, print_note
+from pipelines.errors import PipelineError, one_line, print_note
 
 if TYPE_CHECKING:
     from pipelines.logs.digest import RunDigest
@@ -53,7 +53,7 @@ def read_folder(
             runs.append(digest(read_recording(path), check))
         except PipelineError as exc:
             unreadable[str(path)] = str(exc)
-            tqdm.write(f"crowdmpc review: unreadable: {exc}", file=sys.stderr)
+            tqdm.write(one_line(f"crowdmpc review: unreadable: {exc}"), file=sys.stderr)  # beside the bar
     report.update(unreadable=unreadable, unfinished=[str(p) for p in unfinished])
     note = subfolders_note(folder, unread) if unread else ""
     if not runs:

@@ -48,3 +48,17 @@ def test_a_warning_shown_as_a_note_is_one_line(capsys):
         warnings_as_notes()
         warnings.warn(DroppedLineWarning("runs/a\nb/episodes.jsonl ended in a cut line"), stacklevel=1)
     assert capsys.readouterr().err == "note: runs/a\\nb/episodes.jsonl ended in a cut line\n"
+
+
+def test_reviews_unreadable_recording_naming_a_line_break_is_one_line(tmp_path, capsys):
+    """`crowdmpc review FOLDER` wrote each unreadable recording's line with tqdm.write, past print_note: a
+    recording named $'a\\nb.mcap' ran it over two lines ("unreadable: FOLDER/a", "b.mcap is not an MCAP
+    file ...")."""
+    (tmp_path / "a\nb.mcap").write_bytes(b"garbage")
+    code, _, err = run(capsys, "review", str(tmp_path))
+    assert code == 2
+    assert err.splitlines()[0] == (
+        f"crowdmpc review: unreadable: {tmp_path}/a\\nb.mcap is not an MCAP file (it does not start with "
+        "MCAP's magic bytes)"
+    )
+    assert len(err.splitlines()) == 2  # and the error line: no readable recording
