@@ -114,11 +114,17 @@ def values_and_indices(call: str, sign: int, result: Callable[[Any], Any]) -> Ca
         f"torch.{kind}(x, dim)"
     )
 
-    def handler(x, dim=None, keepdim=False, *, other=None, out=None):
+    def handler(x, dim_or_other=None, keepdim=False, *, dim=None, other=None, out=None):
         if out is not None:
             raise ExportError(f"{name} with out= (a write into a tensor)", current_module())
-        if other is not None or isinstance(dim, (SymTensor, torch.Tensor)):
-            return pairwise(x, dim if other is None else other)
+        # torch takes a tensor in the second place for the other operand, but one named dim= for the dim
+        # (an integer 0-d tensor): taken as the other, torch.max(x, dim=torch.tensor(0)) ran as a maximum
+        if isinstance(dim_or_other, (SymTensor, torch.Tensor)):
+            other = dim_or_other
+        elif dim_or_other is not None:
+            dim = dim_or_other
+        if other is not None:
+            return pairwise(x, other)
         x = lift(x)
         if dim is None:
             return SymTensor(every(x).m, (), x.is_bool)

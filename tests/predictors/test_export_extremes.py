@@ -145,6 +145,14 @@ NAN_CASES = {
 }
 
 
+DIM_TENSORS = {
+    "function": lambda m, x: torch.max(x, dim=torch.tensor(0))[0],
+    "method": lambda m, x: x.min(dim=torch.tensor(1)).values * 2,
+    "keepdim": lambda m, x: torch.max(x, dim=torch.tensor(-1), keepdim=True).values * x,
+    "other_still_positional": lambda m, x: torch.max(x, torch.tensor(0.5)) + torch.min(x, x.T),
+}
+
+
 @pytest.mark.parametrize("symbol", [ca.MX, ca.SX], ids=["MX", "SX"])
 @pytest.mark.parametrize("name", sorted(NAN_CASES))
 def test_a_nan_is_the_extreme_as_in_torch(name, symbol):
@@ -169,3 +177,13 @@ def test_the_gradient_of_max_over_a_dim_goes_to_the_first_nan_as_torchs():
     got = np.asarray(ca.Function("j", [a], [ca.jacobian(function(a), a)])(x.numpy().ravel()))
     torch_jac = torch.autograd.functional.jacobian(lambda y: module(y).reshape(-1), x).reshape(got.shape)
     np.testing.assert_array_equal(got, torch_jac.numpy())
+
+
+@pytest.mark.parametrize("symbol", [ca.MX, ca.SX], ids=["MX", "SX"])
+@pytest.mark.parametrize("name", sorted(DIM_TENSORS))
+def test_a_dim_given_as_a_tensor_by_name_is_the_dim(name, symbol):
+    """torch takes a tensor in max's second place for the other operand, but dim=torch.tensor(0) for the dim:
+    the export took any tensor dim for the other, so torch.max(x, dim=torch.tensor(0))[0] exported the row
+    max(x[0], 0), silently (torch: the columns' maxima), and x.max(dim=torch.tensor(1))[0] ended in numpy's
+    "operands could not be broadcast together" past ExportError."""
+    _assert_matches_torch(DIM_TENSORS[name], POINTS["distinct"], symbol)
