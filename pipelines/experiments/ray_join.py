@@ -232,6 +232,11 @@ def _check_answers(address: str, given: str) -> None:
     try:
         with socket.create_connection((host, port), timeout=JOIN_PROBE_S) as connection:
             first = _first_bytes(connection)
+    except UnicodeError as exc:  # IDNA refuses the host before any lookup: a label empty (x..y) or too long
+        raise PipelineError(
+            f"cannot join a Ray cluster at {given} {address!r}: {host!r} is no host name ({exc}); "
+            f"{_give_address(given)}"
+        ) from None
     except OSError as exc:
         reason = f"no answer in {JOIN_PROBE_S:g} s" if isinstance(exc, TimeoutError) else exc.strerror or exc
         raise PipelineError(

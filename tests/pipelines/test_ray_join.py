@@ -421,3 +421,17 @@ def test_a_ray_job_given_crowdmpc_variables_in_its_runtime_env_still_joins(monke
         PipelineError, match=r"sets OMP_NUM_THREADS='4' \(the sweep's: '1'\), and Ray refuses"
     ):
         RayBackend(1, "none", address=None)
+
+
+@pytest.mark.parametrize("address", ["x..y:6379", "a" * 64 + ":6379", "ray://" + "b" * 64 + ":10001"])
+def test_an_address_whose_host_is_no_host_name_is_refused_in_one_line(address):
+    """`sweep --backend ray --ray-address x..y:6379` (a typo), or a host label past 63 characters, ended in
+    "UnicodeError: encoding with 'idna' codec failed (UnicodeError: label empty or too long)", a traceback:
+    the probe caught OSError alone."""
+    fake = _ray()
+    with pytest.raises(PipelineError) as refused:
+        join_cluster(fake, address, {})
+    said = str(refused.value)
+    assert said.startswith(f"cannot join a Ray cluster at --ray-address {address!r}: ")
+    assert "is no host name" in said and "ray start --head" in said and "\n" not in said
+    assert fake.calls == []  # type: ignore[attr-defined]
