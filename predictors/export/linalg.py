@@ -164,6 +164,8 @@ def softmax_rows(m, mask=None, *, empty_rows_zero=False):
     (torch's attention, whose softmax gives such a row 0: an agent with no neighbour in range).
     """
     cols = m.shape[1]
+    if cols == 0:  # rows of no entry (attention over no key: a crowd of none), as torch's: row_max needs one
+        return m
     shifted = m if mask is None else ca.if_else(mask, m, -1e300, False)
     # The shift by the row's maximum changes no value (softmax is shift invariant) but keeps exp finite.
     e = ca.exp(m - ca.repmat(row_max(shifted), 1, cols))
@@ -180,6 +182,8 @@ def log_softmax_rows(m):
     """``log(softmax)`` of every row as ``m - max - log(sum(exp(m - max)))``: the log of a softmax that has
     underflowed would be -inf (a logit gap above ~745) where torch's is exact."""
     cols = m.shape[1]
+    if cols == 0:  # as softmax_rows
+        return m
     shifted = m - ca.repmat(row_max(m), 1, cols)
     return shifted - ca.repmat(ca.log(ca.sum2(ca.exp(shifted))), 1, cols)
 

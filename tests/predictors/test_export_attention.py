@@ -282,3 +282,32 @@ def test_attention_over_a_batch_of_none_exports_as_torch_runs_it(name, symbol):
     with torch.no_grad():
         expected = module(torch.zeros(0, 3, 4, dtype=torch.float64))
     assert expected.numel() == 0 and function.size_out(0) == (0, 1)
+
+
+NO_KEYS = {
+    "sdpa": lambda m, x: torch.nn.functional.scaled_dot_product_attention(x, x[:, :0], x[:, :0]),
+    "mha": lambda m, x: m.a(x, x[:, :0], x[:, :0], need_weights=False)[0],
+    "mha_weights": lambda m, x: m.a(x, x[:, :0], x[:, :0])[1],
+    "decoder_layer": lambda m, x: m.d(x, x[:, :0]),
+    "softmax": lambda m, x: torch.softmax(x[..., :0], -1) + torch.log_softmax(x[..., :0], -1),
+}
+
+
+@pytest.mark.parametrize("symbol", [ca.MX, ca.SX], ids=["MX", "SX"])
+@pytest.mark.parametrize("name", sorted(NO_KEYS))
+def test_attention_over_no_key_exports_as_torch_runs_it(name, symbol):
+    """Queries attending over no key (a robot's neighbours in a crowd of none): torch gives the output
+    projection's bias (its weights, rows of no entry); the export refused every such net with CasADi's
+    'Assertion "stop<=len" failed' (softmax_rows took the maximum of a row of none)."""
+    torch.manual_seed(0)
+    attention = nn.MultiheadAttention(4, 2, batch_first=True)
+    nn.init.normal_(attention.out_proj.bias)  # torch's zeros would hide a missing bias
+    layer = nn.TransformerDecoderLayer(4, 2, 8, dropout=0.0, batch_first=True)
+    module = Wrap(NO_KEYS[name], a=attention, d=layer).double()
+    spec = TensorSpec("x", (2, 3, 4))
+    function = export_function(module, module.forward, [spec], ["y"], "f", symbol=symbol)
+    x = torch.linspace(-1, 1, 24, dtype=torch.float64).reshape(2, 3, 4)
+    with torch.no_grad():
+        expected = module(x).reshape(-1).numpy()
+    got = np.asarray(function(x.numpy().ravel())).ravel()
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-10)
