@@ -13,6 +13,7 @@ import statistics
 from dataclasses import dataclass
 from typing import Final
 
+from pipelines.errors import PipelineError
 from pipelines.experiments.summary import t95, wilson_interval
 
 # The paper's per-episode outcomes (Section VI): discomfort too is "% of simulations" with the event, each
@@ -150,7 +151,10 @@ class Versus:
 def side(outcomes: list[Outcome]) -> Side:
     travel = [o.travel_time for o in outcomes if o.success and o.travel_time is not None]
     rates = {name: 100.0 * sum(getattr(o, name) for o in outcomes) / len(outcomes) for name in FLAGS}
-    return Side(len(outcomes), rates, sum(travel) / len(travel) if travel else None)
+    mean = sum(travel) / len(travel) if travel else None
+    if mean is not None and not math.isfinite(mean):
+        _past_range("the mean travel time", outcomes)
+    return Side(len(outcomes), rates, mean)
 
 
 def versus(base: list[Outcome], other: list[Outcome]) -> Versus:
@@ -170,8 +174,25 @@ def versus(base: list[Outcome], other: list[Outcome]) -> Versus:
         for b, o in pairs
         if b.success and o.success and b.travel_time is not None and o.travel_time is not None
     ]
-    mean = statistics.fmean(differences) if differences else None
     n = len(differences)
-    half = t95(n - 1) * statistics.stdev(differences) / math.sqrt(n) if n > 1 else None
+    try:  # statistics' errors at a float's end: fsum's OverflowError and ValueError (-inf + inf), stdev's
+        # AttributeError (of an inf)
+        mean = statistics.fmean(differences) if differences else None
+        half = t95(n - 1) * statistics.stdev(differences) / math.sqrt(n) if n > 1 else None
+    except (OverflowError, ValueError, AttributeError):
+        mean = half = math.inf
+    if not all(math.isfinite(x) for x in (mean or 0.0, half or 0.0, *differences)):
+        _past_range("the travel times' paired difference", [*base, *other])
     same = sum(b.same_metrics(o) for b, o in pairs)
     return Versus(flags, mean, half, len(differences), same)
+
+
+def _past_range(what: str, outcomes: list[Outcome]) -> None:
+    """PipelineError for ``what``, past a float's range: only a hand-edited record holds such a travel time
+    (the finite numbers a record may hold go to 1.8e308 s), and Python's statistics ended compare in a
+    traceback on it. Names the episode of the longest travel time."""
+    longest = max(outcomes, key=lambda o: -1.0 if o.travel_time is None else abs(o.travel_time))
+    raise PipelineError(
+        f"{what} is past a float's range: episode {longest.key} records a travel time of "
+        f"{longest.travel_time!r} s, which no episode runs (a damaged record)"
+    )
