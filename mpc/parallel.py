@@ -24,6 +24,7 @@ core; ``"threads"`` is the faster choice for a single run on a machine with a fr
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor, wait
 from typing import Any, TypeVar, cast
@@ -44,18 +45,32 @@ def run_in_threads(
     """``run(*job)`` for every job, results in the jobs' order: the calling thread and up to ``helpers``
     threads of ``pool`` take the jobs one by one from a shared iterator until none is left, so no thread
     waits while there is work and a job costs no hand-over (a future per job cost a third of the speed-up).
-    A helper's exception is raised here, after every thread has stopped."""
+    Once a job raises, in any thread (Ctrl-C's KeyboardInterrupt comes in the calling one), no thread starts
+    another: the jobs running finish (a solver's C call cannot be interrupted), and the exception is raised
+    here, after every thread has stopped."""
     results: list[T | None] = [None] * len(jobs)
     pending = iter(range(len(jobs)))  # next() on a range iterator is atomic under the GIL
+    stop = threading.Event()
 
     def drain() -> None:
-        for k in pending:
-            results[k] = run(*jobs[k])
+        try:
+            # stop is read before a job is taken, never between: a job taken is run (the caller sets stop
+            # once its own drain ends, while a helper may have just taken the last job)
+            while not stop.is_set():
+                k = next(pending, None)
+                if k is None:
+                    return
+                results[k] = run(*jobs[k])
+        except BaseException:
+            stop.set()
+            raise
 
     started = [pool.submit(drain) for _ in range(min(helpers, len(jobs) - 1))]
     try:
         drain()
     finally:
+        # Also for an interrupt outside a job; after a normal return every job is taken, and this stops none.
+        stop.set()
         wait(started)  # never leave a job running in a helper after this call
     for helper in started:
         helper.result()
