@@ -39,6 +39,7 @@ from pipelines.experiments.ray_join import (
     stopped_answering,
     workers_that_fit,
 )
+from pipelines.experiments.ray_stop import StopFlag, finished_on_actors, say_stop, stopped
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import SINGLE_THREAD_ENV, EpisodeOutcome, EpisodeWorker, worker_scratch
 from predictors.plugin_import import search_listed_folders
@@ -110,6 +111,7 @@ class _RayEpisodeWorker(EpisodeWorker):
         jit: bool = False,
         scratch_root: str | None = None,
         timeout_s: float | None = None,
+        stop_flag: Any = None,
     ):
         search_listed_folders()  # the driver's plugin folders, before the move below
         quiet_team_warnings()  # for the actor's life: the sweep says them once (sweep_checks.method_notes)
@@ -117,6 +119,15 @@ class _RayEpisodeWorker(EpisodeWorker):
         if jit:
             os.chdir(scratch)
         super().__init__(record, jit, scratch, timeout_s)
+        self._stop_flag = stop_flag  # a StopFlag actor's handle (pipelines.experiments.ray_stop)
+
+    def run_unless_stopped(self, task: EpisodeTask) -> EpisodeOutcome | None:
+        """``run(task)``; None, never started, once the driver has said the sweep stops."""
+        import ray
+
+        if self._stop_flag is not None and stopped(ray, self._stop_flag):
+            return None
+        return self.run(task)
 
     def code(self) -> tuple[str, dict[str, Any] | str]:
         """(this node's name, the code it runs as the driver records its own: ``code_with_plugins``), the
@@ -183,7 +194,8 @@ class RayBackend:
         self._local = self._owns_ray and address is None  # a Ray of its own: no cluster to wait for
         self._gcs = gcs_endpoint(ray, address)
         self._actor_class: Any = ray.remote(num_cpus=1)(_RayEpisodeWorker)
-        self._actor_args = (record, jit, scratch_root, timeout_s)
+        self._flag: Any = ray.remote(num_cpus=0)(StopFlag).remote()  # the stop's word to the actors
+        self._actor_args = (record, jit, scratch_root, timeout_s, self._flag)
         self._actors: list[Any] = [self._actor_class.remote(*self._actor_args) for _ in range(workers)]
         self._uncommitted_nodes: set[str] = set()  # compared without a commit: said once a node
         self._gcs_gone = False
@@ -240,7 +252,8 @@ class RayBackend:
 
         def submit(slot: int, count: int) -> None:
             for task in _take(pending, count):
-                owner[self._actors[slot].run.remote(task)] = (slot, self._actors[slot], task)
+                ref = self._actors[slot].run_unless_stopped.remote(task)  # None only after ``finished``
+                owner[ref] = (slot, self._actors[slot], task)
 
         for slot in range(len(self._actors)):
             submit(slot, 2)
@@ -291,20 +304,14 @@ class RayBackend:
     def finished(self, wait_s: float) -> tuple[list[EpisodeOutcome], int]:
         """At a stop (pipelines.experiments.sweep_stop): the outcomes of the episodes the actors hold that
         come back within ``wait_s`` (once the cluster's GCS is gone, only those back already: nothing came
-        for GCS_GONE_S, and Ray's waits without a timeout wait on it), and how many others were cut."""
-        ray, refs = self._ray, list(self._owner)
+        for GCS_GONE_S, and Ray's waits without a timeout wait on it), and how many of the others the actors
+        were running (cut); from the stop on, an actor starts no episode it takes
+        (pipelines.experiments.ray_stop)."""
+        held = dict(self._owner)
         self._owner.clear()
-        if not refs:
-            return [], 0
-        done, _ = ray.wait(refs, num_returns=len(refs), timeout=0.0 if self._gcs_gone else wait_s)
-        lost = getattr(ray.exceptions, "RayError", ray.exceptions.RayActorError)
-        back = []
-        for ref in done:
-            try:  # back already: a bounded get all the same, on a cluster going away
-                back.append(ray.get(ref, timeout=GCS_PROBE_S))
-            except lost:  # its actor died, or it did not come: no episode finished
-                continue
-        return back, len(refs) - len(back)
+        if held and not self._gcs_gone:
+            say_stop(self._ray, self._flag)
+        return finished_on_actors(self._ray, held, wait_s, self._gcs_gone)
 
     def close(self) -> None:
         if self._gcs_gone:  # Ray's kill and shutdown wait on the lost GCS until Ray ends the process
@@ -314,7 +321,7 @@ class RayBackend:
                 with contextlib.suppress(Exception):  # a hung or dead actor: killed below all the same
                     self._ray.get([actor.close.remote() for actor in self._actors], timeout=CLOSE_GRACE_S)
         finally:  # a Ctrl-C in the wait above still ends the actors
-            for actor in self._actors:
+            for actor in [*self._actors, self._flag]:
                 self._ray.kill(actor)
         if self._owns_ray:
             self._ray.shutdown()

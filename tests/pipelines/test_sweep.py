@@ -553,7 +553,7 @@ def _fake_ray(monkeypatch, dies: set[str], code: dict | None = None) -> list[int
         def __init__(self):
             self.id, self.dead = len(made), False
             made.append(self.id)
-            self.run = types.SimpleNamespace(remote=lambda task: Ref(self, task))
+            self.run_unless_stopped = types.SimpleNamespace(remote=lambda task: Ref(self, task))
             self.code = types.SimpleNamespace(remote=lambda: Ref(self, None))
 
     def get(ref):
@@ -566,11 +566,16 @@ def _fake_ray(monkeypatch, dies: set[str], code: dict | None = None) -> list[int
 
     fake = types.ModuleType("ray")
     fake.is_initialized = lambda: True  # type: ignore[attr-defined]
-    fake.remote = lambda **_: lambda cls: types.SimpleNamespace(remote=lambda *a: Actor())  # type: ignore[attr-defined]
+    flag = types.SimpleNamespace()  # the backend's StopFlag: no stop said in these tests
+    fake.remote = lambda **_: (
+        lambda cls: types.SimpleNamespace(  # type: ignore[attr-defined]
+            remote=lambda *a: flag if cls.__name__ == "StopFlag" else Actor()
+        )
+    )
     fake.wait = lambda refs, num_returns: (refs[:1], refs[1:])  # type: ignore[attr-defined]
     fake.get = get  # type: ignore[attr-defined]
     fake.exceptions = types.SimpleNamespace(RayActorError=_FakeActorDied)  # type: ignore[attr-defined]
-    fake.kill = lambda actor: killed.append(actor.id)  # type: ignore[attr-defined]
+    fake.kill = lambda actor: actor is flag or killed.append(actor.id)  # type: ignore[attr-defined]
     fake.killed = killed  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "ray", fake)
     return made
@@ -1560,7 +1565,7 @@ def test_a_ray_cluster_that_stops_answering_stops_the_sweep_in_one_line(lost_fir
         n = len(actors)
         actors.append(types.SimpleNamespace(
             code=types.SimpleNamespace(remote=lambda: ("code", n)),
-            run=types.SimpleNamespace(remote=lambda task: ("run", n)),
+            run_unless_stopped=types.SimpleNamespace(remote=lambda task: ("run", n)),
         ))  # fmt: skip
         return actors[-1]
 
@@ -1579,7 +1584,11 @@ def test_a_ray_cluster_that_stops_answering_stops_the_sweep_in_one_line(lost_fir
     fake.is_initialized = lambda: not local  # type: ignore[attr-defined]
     fake.init = lambda address, **_: address == "local" or pytest.fail(address)  # type: ignore[attr-defined]
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
-    fake.remote = lambda **_: lambda cls: types.SimpleNamespace(remote=actor)  # type: ignore[attr-defined]
+    fake.remote = lambda **_: (
+        lambda cls: types.SimpleNamespace(  # type: ignore[attr-defined]
+            remote=(lambda *a: types.SimpleNamespace()) if cls.__name__ == "StopFlag" else actor
+        )
+    )
     fake.wait, fake.get = wait, get  # type: ignore[attr-defined]
     fake.exceptions = types.SimpleNamespace(RayActorError=_FakeActorDied)  # type: ignore[attr-defined]
     gcs = types.SimpleNamespace(gcs_address=f"127.0.0.1:{port}")

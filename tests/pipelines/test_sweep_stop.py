@@ -95,18 +95,20 @@ def test_an_interrupted_sweep_records_the_episodes_its_workers_finish(
 ):
     """`--workers 2`, Ctrl-C (or `kill`) while both workers ran an episode a second from its end: the driver
     closed the backend at once and both were lost (a Table II sweep's two, each about a second from its end).
-    Now they are recorded; the minute's episode is cut where it ran (Ray: on the second actor), the line
-    asking for a rerun says so, and a process pool's worker that frees up does not start it (pool_stop)."""
+    Now they are recorded, and a worker that frees up does not start the minute's episode, queued behind
+    them (pool_stop, ray_stop; a Ray actor holds two, so there it is the first actor's second), nor is it
+    counted as cut."""
     if backend == "ray":
         pytest.importorskip("ray")  # the [cluster] extra
     monkeypatch.setenv("CROWDMPC_TEST_DRIVER", str(os.getpid()))
     monkeypatch.setenv("CROWDMPC_TEST_SIGNAL", sent)
     if backend == "process":  # the interrupt waits for the second's episode to start (under load a worker
         # may not have begun it, and a stopping pool starts none); Ray's actors take theirs as they are handed
-        monkeypatch.setenv("CROWDMPC_TEST_MARKS", str(tmp_path_factory.mktemp("marks")))
+        monkeypatch.setenv("CROWDMPC_TEST_STARTED", str(tmp_path_factory.mktemp("started")))
     interrupts, slow, sleeps = plugins("InterruptsTheSweep", "TakesASecond", "SleepsInReset")
     start = time.monotonic()
-    assert main(_sweep(tmp_path, [interrupts, slow, sleeps], backend)) == status
+    controllers = [interrupts, slow, sleeps] if backend == "process" else [interrupts, sleeps, slow]
+    assert main(_sweep(tmp_path, controllers, backend)) == status
     assert time.monotonic() - start < 45  # the workers' start, the wait, and their end: not the minute
     err = capsys.readouterr().err.strip().splitlines()
     records = EpisodeLog(tmp_path / EPISODES_FILE).load()
@@ -115,8 +117,7 @@ def test_an_interrupted_sweep_records_the_episodes_its_workers_finish(
         "interrupted: recording the episodes the workers finish within 5 s; interrupt again to stop at once"
     )
     assert said in err
-    cut = "; 1 episode in flight on the workers was cut unrecorded (a resume runs it)"
-    assert "interrupted: rerun the same command to resume" + ("" if backend == "process" else cut) in err
+    assert "interrupted: rerun the same command to resume" in err  # nothing cut
     assert (tmp_path / "table.md").exists()  # the report of what it recorded
 
 
@@ -137,10 +138,11 @@ def test_a_second_interrupt_ends_the_wait_at_once(tmp_path, plugins, capsys, mon
 
 
 class _Refs:
-    """A stand-in ``ray`` for RayBackend.finished: ``done`` the refs back, ``died`` those whose actor died."""
+    """A stand-in ``ray`` for RayBackend.finished: ``done`` the refs back, ``died`` those whose actor died,
+    ``unstarted`` those an actor handed back unstarted (None) after the stop."""
 
-    def __init__(self, done: set[str], died: set[str]):
-        self.done, self.died, self.timeouts = done, died, []
+    def __init__(self, done: set[str], died: set[str], unstarted: set[str]):
+        self.done, self.died, self.unstarted, self.timeouts = done, died, unstarted, []
         self.exceptions = types.SimpleNamespace(RayActorError=RuntimeError)
 
     def wait(self, refs, num_returns, timeout):
@@ -150,22 +152,45 @@ class _Refs:
     def get(self, ref, timeout):
         if ref in self.died:
             raise RuntimeError("The actor died unexpectedly before finishing this task.")
-        return f"outcome of {ref}"
+        return None if ref in self.unstarted else f"outcome of {ref}"
+
+
+class _Flag:
+    """A stand-in StopFlag actor's handle: ``said`` once the stop was said."""
+
+    def __init__(self):
+        self.said = False
+        self.stop = types.SimpleNamespace(remote=self._stop)
+
+    def _stop(self):
+        self.said = True
+        return "set"
 
 
 @pytest.mark.parametrize("gcs_gone", [False, True])
 def test_the_ray_backend_gives_back_what_its_actors_finished_and_counts_the_rest(gcs_gone):
-    """Without Ray: the episodes back are given, those of a dead actor and those still out are cut; once the
-    cluster's GCS is gone (nothing came back for GCS_GONE_S) it takes only those back already, waiting
-    none."""
+    """Without Ray: the episodes back are given; the one a dead actor ran and the one still running are cut,
+    and of an actor's episodes not back only the one it runs: another of its own, still out or handed back
+    unstarted, never started. Once the cluster's GCS is gone (nothing came back for GCS_GONE_S) it takes only
+    those back already, waiting for none and saying nothing to the actors."""
     from pipelines.experiments.backends import RayBackend
 
     backend = RayBackend.__new__(RayBackend)  # its state alone: no Ray started
-    backend._ray = _Refs(done={"a", "b"}, died={"b"})
+    backend._ray = _Refs(done={"a", "b", "b2", "e"}, died={"b", "b2"}, unstarted={"e"})
     backend._gcs_gone = gcs_gone
-    backend._owner = {"a": None, "b": None, "c": None}
+    backend._flag = _Flag()
+    one, two, three, four = object(), object(), object(), object()
+    backend._owner = {
+        "a": (0, one, None),
+        "b": (1, two, None),  # its actor died: b2 never started
+        "b2": (1, two, None),
+        "c": (2, three, None),  # still running: d queued behind it
+        "d": (2, three, None),
+        "e": (3, four, None),
+    }
     assert backend.finished(7.0) == (["outcome of a"], 2)
     assert backend._ray.timeouts == [0.0 if gcs_gone else 7.0]
+    assert backend._flag.said is not gcs_gone
     assert backend.finished(7.0) == ([], 0)  # given once
 
 
@@ -263,7 +288,9 @@ def test_a_write_that_fails_at_an_interrupt_joins_the_interrupted_line(tmp_path,
     assert err[-1] == "interrupted: rerun the same command to resume" + _UNKEPT
 
 
+@pytest.mark.parametrize("backend", ["process", "ray"])
 def test_a_stop_counts_as_cut_only_the_episodes_that_were_running(
+    backend,
     tmp_path,
     plugins,  # noqa: F811
     capsys,
@@ -271,12 +298,15 @@ def test_a_stop_counts_as_cut_only_the_episodes_that_were_running(
     ctrl_c,
 ):
     """`--workers 1`, Ctrl-C in its first episode: the process pool had taken the second one into its call
-    queue, where it counts as running and no cancel reaches it, and the stop's line said "2 episodes in flight
-    on the workers were cut", one of which never started."""
+    queue, where it counts as running and no cancel reaches it (a Ray actor holds it queued behind the
+    first), and the stop's line said "2 episodes in flight on the workers were cut", one of which never
+    started."""
+    if backend == "ray":
+        pytest.importorskip("ray")  # the [cluster] extra
     monkeypatch.setattr(sweep_stop, "STOP_WAIT_S", 0.5)
     monkeypatch.setenv("CROWDMPC_TEST_DRIVER", str(os.getpid()))
     interrupts, queued = plugins("InterruptsThenSleeps", "TakesASecond")
-    argv = _sweep(tmp_path, [interrupts, queued], "process")
+    argv = _sweep(tmp_path, [interrupts, queued], backend)
     argv[argv.index("--workers") + 1] = "1"
     assert main(argv) == 130
     err = capsys.readouterr().err.strip().splitlines()
@@ -294,6 +324,36 @@ def _stop_signals_by_default() -> None:
     leaving an ignored signal ignored, ran on past the test's SIGHUP."""
     for signum in (signal.SIGTERM, signal.SIGHUP):
         signal.signal(signum, signal.SIG_DFL)
+
+
+@pytest.mark.parametrize("backend", ["process", "ray"])
+def test_a_worker_that_frees_up_at_a_stop_starts_no_queued_episode(
+    backend,
+    tmp_path,
+    plugins,  # noqa: F811
+    capsys,
+    monkeypatch,
+    ctrl_c,
+):
+    """`--workers 1`, Ctrl-C in its first episode, which ends a second later, within the stop's wait: the Ray
+    actor then started the episode queued behind it (it left its mark), which a resume runs all the same.
+    Now the first is recorded and the queued one never starts, nor is it counted as cut."""
+    if backend == "ray":
+        pytest.importorskip("ray")  # the [cluster] extra
+    marks = tmp_path / "marks"
+    marks.mkdir()
+    monkeypatch.setenv("CROWDMPC_TEST_MARKS", str(marks))
+    monkeypatch.setenv("CROWDMPC_TEST_DRIVER", str(os.getpid()))
+    interrupts, queued = plugins("InterruptsTheSweep", "MarksThenTakesThreeSeconds")
+    out = tmp_path / "sweep"
+    argv = _sweep(out, [interrupts, queued], backend)
+    argv[argv.index("--workers") + 1] = "1"
+    assert main(argv) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "interrupted: rerun the same command to resume" in err  # nothing cut
+    records = EpisodeLog(out / EPISODES_FILE).load()
+    assert [r["controller"] for r in records.values()] == ["interrupts_the_sweep"]
+    assert list(marks.iterdir()) == []
 
 
 @pytest.mark.parametrize(("sent", "status"), [("TERM", 143), ("HUP", 129)])

@@ -205,17 +205,17 @@ class InterruptsThenSleeps(StraightLine):
 
 
 def _mark(name: str) -> None:
-    """A file ``name`` in ``$CROWDMPC_TEST_MARKS`` (when set): the episode of ``name`` has started."""
-    marks = os.environ.get("CROWDMPC_TEST_MARKS")
+    """A file ``name`` in ``$CROWDMPC_TEST_STARTED`` (when set): the episode of ``name`` has started."""
+    marks = os.environ.get("CROWDMPC_TEST_STARTED")
     if marks:
         Path(marks, name).touch()
 
 
 def _wait_for_mark(name: str, bound_s: float = 60.0) -> None:
-    """Until ``_mark(name)`` (when ``$CROWDMPC_TEST_MARKS`` is set, at most ``bound_s``): a worker of a loaded
-    machine (CI's two test processes on two cores) may not have started its episode when the other's reset
-    signals the sweep, and a stopping pool starts none (pipelines.experiments.pool_stop)."""
-    marks = os.environ.get("CROWDMPC_TEST_MARKS")
+    """Until ``_mark(name)`` (when ``$CROWDMPC_TEST_STARTED`` is set, at most ``bound_s``): a worker of a
+    loaded machine (CI's two test processes on two cores) may not have started its episode when the other's
+    reset signals the sweep, and a stopping pool starts none (pipelines.experiments.pool_stop)."""
+    marks = os.environ.get("CROWDMPC_TEST_STARTED")
     deadline = time.monotonic() + bound_s
     while marks and not Path(marks, name).exists() and time.monotonic() < deadline:
         time.sleep(0.02)
