@@ -1,8 +1,9 @@
 """Joining a Ray cluster (``sweep --ray-address``, or ``$RAY_ADDRESS`` as ``ray.init`` reads it): what goes
 wrong there is the user's set-up, not a bug, so each failure is one line naming the address (nothing
 listening at it, another program's port, a dashboard's URL, a cluster that wants an authentication token,
-Ray's own refusals), a join that takes long says so, and on a cluster with fewer free CPUs than workers the
-sweep runs as many workers as fit. Ray's C++ warnings that repeat while it retries a refusal show once
+at once where it refuses the driver's: pipelines.experiments.ray_token, Ray's own refusals), a join that
+takes long says so, and on a cluster with fewer free CPUs than workers the sweep runs as many workers as
+fit. Ray's C++ warnings that repeat while it retries a refusal show once
 (pipelines.experiments.ray_stderr), the variables a `ray job submit` job's runtime_env sets are left to it
 (``left_to_the_job``), and a relative --out there, a folder in Ray's copy of the working directory, is
 refused (``check_output_outside_job_copy``). It also finds and tries the port whose answer says the cluster
@@ -18,6 +19,7 @@ from typing import Any, Final
 
 from pipelines.errors import PipelineError, print_note
 from pipelines.experiments.ray_stderr import repeats_said_once
+from pipelines.experiments.ray_token import check_token
 from predictors.errors import short_repr
 
 JOIN_PROBE_S: Final[float] = 10.0  # a cluster's head answers a connection at once; a firewall drops it
@@ -112,6 +114,7 @@ def join_cluster(ray: Any, address: str, env: dict[str, Any], given: str = "--ra
         refused += (ray_error,)
     try:
         with repeats_said_once():  # Ray's C++ client warns once a second while it retries a refusal
+            check_token(ray, address, _refused_token)  # a refused token at once, not after 20 s of tries
             ray.init(address=address, runtime_env=env, log_to_driver=False)
     except refused as exc:
         # refused for its token: the address is right, and the hint is the whole answer
