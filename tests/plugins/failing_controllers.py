@@ -136,6 +136,7 @@ class RefusesWeights(StraightLine):
     def reset(self, obs: Observation) -> None:
         from pipelines.experiments.checked_weights import WeightsReplaced
 
+        _wait_for_mark(TakesASecond.name)
         raise WeightsReplaced("predictor 'mine': the weights were replaced (a stand-in refusal)")
 
 
