@@ -9,6 +9,7 @@ only while tracked: the policy reads the ``present`` column, so it runs among ei
 """
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 
@@ -16,6 +17,8 @@ from crowdsim.env_config import EnvConfig
 from crowdsim.gym_env import GOAL, POSITION, PRESENT
 from crowdsim.gym_wrappers import VelocityControl
 from crowdsim.replay import CROWDS
+from pipelines.commands import check_writable
+from pipelines.errors import PipelineError
 from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.loop.gym_loop import ObserveEpisodes, make_env
 
@@ -55,7 +58,7 @@ def main(
 
 if __name__ == "__main__":
     # argparse: a mistyped argument ends in one line naming it (an OUT_DIR given alone was taken for
-    # EPISODES, a TypeError from range)
+    # EPISODES, a TypeError from range; a folder that cannot be made, /proc/x, a FileNotFoundError)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("episodes", nargs="?", type=int, default=3, metavar="EPISODES", help="seeds 0.. (3)")
     parser.add_argument(
@@ -65,4 +68,8 @@ if __name__ == "__main__":
         "crowd", nargs="?", default="orca", choices=CROWDS, metavar="CROWD", help="orca, eth_test ..."
     )
     args = parser.parse_args()
+    try:
+        check_writable(Path(args.out_dir), "argument OUT_DIR", directory=True)
+    except PipelineError as exc:
+        parser.error(str(exc))
     main(args.episodes, args.out_dir, args.crowd)

@@ -16,6 +16,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from pipelines.commands import check_writable
+from pipelines.errors import PipelineError
 from pipelines.experiments.cells import Experiment
 from pipelines.experiments.log import episode_log
 from pipelines.experiments.report import write_report
@@ -55,4 +57,8 @@ if __name__ == "__main__":
     parser.add_argument("out", help="the sweep folder (created, or extended)")
     parser.add_argument("--episodes", type=int, default=20, help="episodes per cell")
     args = parser.parse_args()
+    try:  # a folder that cannot be made (/proc/x) was a FileNotFoundError traceback from the sweep
+        check_writable(Path(args.out), "argument out", directory=True)
+    except PipelineError as exc:
+        parser.error(str(exc))
     main(args.out, args.episodes)

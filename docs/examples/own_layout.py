@@ -9,13 +9,16 @@ makes it step aside for whoever would walk into it). Run it from the repository 
 then the two side by side.
 """
 
-import sys
+import argparse
+from pathlib import Path
 
 import gymnasium as gym
 
 import crowdsim  # registers crowdmpc/CrowdNav-v0
 from crowdsim.env import EnvConfig
 from crowdsim.scenarios import Layout
+from pipelines.commands import check_writable
+from pipelines.errors import PipelineError
 from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.gym_loop import run_gym_episode
@@ -51,4 +54,19 @@ def main(out_dir: str = "runs/own_layout", controllers: tuple[str, ...] = ("cmpc
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:2])
+    # argparse: a folder that cannot be made (/proc/x) ended in a FileNotFoundError traceback from the
+    # recorder, after both controllers were built; now one line naming OUT_DIR, before any work
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "out_dir",
+        nargs="?",
+        default="runs/own_layout",
+        metavar="OUT_DIR",
+        help="a folder per controller inside it (%(default)s)",
+    )
+    args = parser.parse_args()
+    try:
+        check_writable(Path(args.out_dir), "argument OUT_DIR", directory=True)
+    except PipelineError as exc:
+        parser.error(str(exc))
+    main(args.out_dir)
