@@ -21,6 +21,7 @@ from pipelines.commands import check_writable
 from pipelines.errors import PipelineError
 from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.loop.gym_loop import ObserveEpisodes, make_env
+from predictors.text_table import counted
 
 
 def policy(obs: np.ndarray, n_robots: int) -> np.ndarray:
@@ -53,7 +54,7 @@ def main(
             print(
                 f"seed {seed}: return {total:+.2f}, success {m.success}, min distance {m.min_distance:.2f} m"
             )
-    print(f"wrote {len(recorder.paths)} MCAP files to {out_dir}")
+    print(f"wrote {counted(len(recorder.paths), 'MCAP file')} to {out_dir}")
 
 
 if __name__ == "__main__":

@@ -236,7 +236,7 @@ def test_the_docs_examples_command_line_refuses_a_bad_argument_in_one_line(
     assert not (tmp_path / "runs").exists()
     monkeypatch.setattr("sys.argv", [str(EXAMPLE), "1", "runs/g"])  # the documented form still runs
     runpy.run_path(str(EXAMPLE), run_name="__main__")
-    assert capsys.readouterr().out.splitlines()[-1] == "wrote 1 MCAP files to runs/g"
+    assert capsys.readouterr().out.splitlines()[-1] == "wrote 1 MCAP file to runs/g"
 
 
 def test_an_episode_ended_by_gymnasiums_time_limit_is_recorded_whole(tmp_path):

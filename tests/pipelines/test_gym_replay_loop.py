@@ -85,7 +85,7 @@ def test_the_docs_velocity_policy_runs_among_real_people(data, tmp_path, capsys)
     spec.loader.exec_module(example)
     example.main(episodes=1, out_dir=str(tmp_path / "runs"), crowd="eth_test", n_humans=8)
     out = capsys.readouterr().out.splitlines()
-    assert out[0].startswith("seed 0: return ") and out[-1] == f"wrote 1 MCAP files to {tmp_path / 'runs'}"
+    assert out[0].startswith("seed 0: return ") and out[-1] == f"wrote 1 MCAP file to {tmp_path / 'runs'}"
     from pipelines.logs.reader import read_recording
 
     (path,) = (tmp_path / "runs").glob("*.mcap")
