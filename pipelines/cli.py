@@ -20,6 +20,7 @@ from pipelines.errors import (
     storage_refusal,
     warnings_as_notes,
 )
+from pipelines.lightning_names import lightning_hint
 
 # The order in which subcommands are listed by --help.
 COMMANDS = (
@@ -123,6 +124,7 @@ class OneLineParser(argparse.ArgumentParser):
             if message.startswith("unrecognized arguments:"):
                 message = _plugin_as_given(message, OneLineParser.given)
             message += " (--plugin goes before COMMAND: crowdmpc --plugin MODULE:CLASS COMMAND ...)"
+        message += _train_hint(self, message, OneLineParser.given)
         prog = self.prog
         if message.startswith("unrecognized arguments:") and "--plugin goes" not in message:
             # argparse's top level says it for every command, and --plugin's hint points at the top's help
@@ -139,6 +141,20 @@ def _command(parser: argparse.ArgumentParser, given: list[str]) -> list[str]:
                 if arg in action.choices:
                     return [arg, *_command(action.choices[arg], given[k + 1 :])]
     return []
+
+
+def _train_hint(parser: argparse.ArgumentParser, message: str, given: list[str]) -> str:
+    """``lightning_hint`` of ``given`` for an error of `crowdmpc train`'s arguments (refused by the top level
+    as unrecognized, or by train's own parser: "--model is required"), else ""."""
+    command = _command(parser, given)
+    if parser.prog.split()[1:] + command != ["train"]:
+        return ""
+    if command and not message.startswith("unrecognized arguments:"):
+        return ""  # the top level's own (a --plugin that does not import), of no train option
+    for name in command:  # the top level's: down to train's own parser, whose options are not hinted
+        parser = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[name]
+    words = given[given.index("train") + 1 :] if "train" in given else given
+    return lightning_hint(words, parser._option_string_actions)
 
 
 def _command_run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[str]:
