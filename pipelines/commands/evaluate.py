@@ -156,6 +156,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     check_writable(args.json, "--json", json_only=True)
     _choose_files(args)
     config = EvalConfig(top_k=args.top_k, seed=args.seed)
+    from pipelines.commands.quick_check_notes import quick_check_note
     from pipelines.commands.simulate_checks import zoo_notes
 
     # the entry the name loads (none for a built-in: constant velocity, the oracle), read once so that the
@@ -174,6 +175,10 @@ def _evaluate(args: argparse.Namespace) -> int:
         root = prepared_dir(args.data_dir)
     check_dataset_predictor(predictor)  # before the files are read
     loaded = _scenes(args, files[args.split], config, root)
+    entry = None if located is None else located.entry
+    quick = quick_check_note(args.predictor, entry)  # once the model and the files are taken, not before
+    if quick is not None:
+        print_note(quick)
     result = evaluate_scenes(predictor, loaded, config, progress=progress, root=root)
     result.update(
         protocol=args.protocol,
@@ -186,7 +191,6 @@ def _evaluate(args: argparse.Namespace) -> int:
         seed=args.seed,
         code=code_with_plugins(),
     )
-    entry = None if located is None else located.entry
     trained = None if entry is None else entry.protocol
     result["trained_protocol"] = trained  # None: no zoo entry (constant velocity, the oracle)
     if root is None:

@@ -170,6 +170,7 @@ def run(args: argparse.Namespace) -> int:
     check_outside_the_zoos(args.out, "--out", "the export")
     check_writable(args.out, "--out")  # before the export, not when CasADi fails to open it afterwards
     _check_replaces_an_export(args.out)
+    from pipelines.commands.quick_check_notes import quick_check_note
     from pipelines.commands.simulate_checks import zoo_notes
 
     # the entry the name loads located once, for the notes and the load: each located apart, the manifest
@@ -180,6 +181,9 @@ def run(args: argparse.Namespace) -> int:
     for note in zoo_notes(args.name, entry):
         print_note(note)
     predictor = load_predictor(args.name) if located is None else load_located(located)
+    quick = quick_check_note(args.name, entry)  # once the model loads: not before a refusal of it
+    if quick is not None:
+        print_note(quick)
     if (args.humans + args.robots) * args.horizon >= LONG_EXPORT and args.name not in PREDICTORS:
         print_note(  # one CasADi call builds and checks it: Ctrl-C and kill -TERM wait for it to return
             f"note: a net's twin for {args.humans + args.robots} agents over {args.horizon} steps takes long "

@@ -355,16 +355,13 @@ def zoo_entry(predictor: str | None) -> ZooEntry | None:
 
 def zoo_notes(predictor: str | None, entry: ZooEntry | None) -> list[str]:
     """The lines on the zoo model ``predictor`` loads (none for a registered predictor), of its ``entry``
-    (``zoo_entry``): a plugin net whose module file changed since training (``plugin_entry_note``: its
-    outputs may differ from the figures `zoo list` shows), and a quick check trained with ``train
-    --limit-batches`` (``zoo.quick_check_line``: simulate, sweep and evaluate ran it beside trained models
-    without a word)."""
-    from pipelines.commands.zoo_list import quick_check_line
-
+    (``zoo_entry``), printed before the load, whose refusal they may explain: a plugin net whose module file
+    changed since training (``plugin_entry_note``: its outputs may differ from the figures `zoo list`
+    shows). A quick check's note waits until the inputs are accepted (``quick_check_notes``)."""
     if predictor is None or entry is None:
         return []
-    notes = (plugin_entry_note(predictor, entry), quick_check_line(repr(predictor), entry.training))
-    return [note for note in notes if note is not None]
+    note = plugin_entry_note(predictor, entry)
+    return [] if note is None else [note]
 
 
 def plugin_entry_note(predictor: str, entry: ZooEntry | None) -> str | None:

@@ -20,7 +20,9 @@ def noted_reads(cfg: RunConfig, spec: ControllerSpec, checked: PredictorRead | N
     from pipelines.commands import simulate_checks as checks
     from pipelines.commands import team_notes
     from pipelines.commands.calibration_notes import calibration_notes
+    from pipelines.commands.quick_check_notes import quick_check_note
     from pipelines.commands.simulate_reads import read_once
+    from pipelines.loop.margins_read import Refused
 
     scenario, formation, spacing = cfg.scenario, cfg.env.formation, cfg.env.robot_spacing
     entry, read = read_once(checked, spec, cfg)  # for the notes and the controller
@@ -33,6 +35,8 @@ def noted_reads(cfg: RunConfig, spec: ControllerSpec, checked: PredictorRead | N
         checks.size_note(spec, scenario.humans, scenario.robots),
         checks.tolerance_note(spec),
         *checks.zoo_notes(spec.predictor_name, entry),
+        # not before the controller's refusal of a model that does not load (a plugin not registered)
+        None if isinstance(read.predictor, Refused) else quick_check_note(spec.predictor_name, entry),
         *calibration_notes(spec, cfg, read.calibration, entry),
     )
     for note in filter(None, notes):

@@ -18,8 +18,12 @@ from pipelines.commands.sweep_plan import check_iterations_recorded, check_world
 from pipelines.errors import PipelineError, SweepStopped
 
 if TYPE_CHECKING:
+    from collections.abc import Iterable
+
     from pipelines.commands.sweep_log_read import LogRead
+    from pipelines.commands.sweep_predictors import PlanModels
     from pipelines.config import RunConfig
+    from pipelines.experiments.cells import Cell
     from pipelines.experiments.sweep_config import SweepConfig
 
 
@@ -97,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         check_plan(experiment, cfg, models, folders)  # a plan whose every episode would fail is not fine
         check_first_episodes(tasks)
+        _quick_check_notes(cells, models)
         from pipelines.commands.sweep_dry_run import print_plan
 
         print_plan(config, cells, tasks, args.reuse, models)
@@ -109,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
         check_first_episodes(tasks)
         if config.jit:
             check_compile_cache(cfg.label("sweep", "jit"), cfg.sweep.jit)
+        _quick_check_notes(cells, models)
         # what the report takes of the log, filled as the sweep reads its records and appends new ones: the
         # log is read once (and its planned lines once more, by offset, for episodes.csv), not scanned again
         log = LogRead.of_plan(cells, tasks)
@@ -125,6 +131,16 @@ def run(args: argparse.Namespace) -> int:
     if args.report_only or (out / SWEEP_FILE).exists():  # none: stopped before it started, nothing to tell
         report(config, cells, tasks, report_only=args.report_only, log=log, workers=workers)
     return stop_status() if status == INTERRUPTED else status  # 143 for SIGTERM (pipelines.loop.interrupt)
+
+
+def _quick_check_notes(cells: Iterable[Cell], models: PlanModels | None) -> None:
+    """The quick-check models' notes, once the plan's checks took it: with the notes before them
+    (``noted_models``) they preceded refusals they have nothing to do with (a plugin not registered)."""
+    from pipelines.commands.quick_check_notes import method_quick_check_notes
+    from pipelines.errors import print_note
+
+    for note in method_quick_check_notes(cells, {} if models is None else models.entries):
+        print_note(note)
 
 
 def _nothing_recorded(out: Path) -> str:

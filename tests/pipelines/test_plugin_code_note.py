@@ -37,16 +37,22 @@ def test_the_same_file_or_no_record_says_nothing(monkeypatch):
 
 
 def test_a_quick_check_is_noted_where_it_runs(monkeypatch):
-    """`zoo add` and `zoo list` said so; simulate, sweep, evaluate and export ran it beside trained models."""
+    """`zoo add` and `zoo list` said so; simulate, sweep, evaluate and export ran it beside trained models.
+    Not among the notes before the load (zoo_notes): printed once the inputs are taken
+    (tests/pipelines/test_quick_check_note_order.py)."""
+    from pipelines.commands.quick_check_notes import quick_check_note
+
     entry = SimpleNamespace(model="mine:Net", training={"limit_batches": 20})
     monkeypatch.setattr("predictors.zoo.locate", lambda name: SimpleNamespace(entry=entry))
-    assert zoo_notes("my_net_eth") == [
+    located = simulate_checks.zoo_entry("my_net_eth")
+    assert quick_check_note("my_net_eth", located) == (
         "note: 'my_net_eth' trained on 20 batches an epoch (train --limit-batches 20): a quick check, not a "
         "trained model (zoo list: *)"
-    ]
-    entry.training = {}
+    )
     assert zoo_notes("my_net_eth") == []
-    assert zoo_notes("constant_velocity") == []  # registered: no zoo entry read
+    entry.training = {}
+    assert quick_check_note("my_net_eth", located) is None
+    assert quick_check_note("constant_velocity", simulate_checks.zoo_entry("constant_velocity")) is None
 
 
 def test_export_says_a_changed_plugin_before_a_load_that_fails(monkeypatch, tmp_path, capsys):
