@@ -96,7 +96,8 @@ def test_a_new_process_loads_a_plugin_model_only_with_the_plugin_registered(tmp_
     assert done.stderr == _no_plugin_line("export") + "\n"
 
 
-def _toy_checkpoint(tmp_path: Path) -> Path:
+def _toy_checkpoint(tmp_path: Path, name: str = "toy", metrics: str = "{}") -> Path:
+    """The toy plugin's net saved as ``name`` in tmp_path/run, with ``metrics`` as its metrics file."""
     from predictors.checkpoint import save_checkpoint
     from predictors.models import load_plugin
 
@@ -105,11 +106,11 @@ def _toy_checkpoint(tmp_path: Path) -> Path:
     weights, _ = save_checkpoint(
         kind.build_net(kind.config({"hidden_dim": 4})),
         model=TOY,
-        name="toy",
+        name=name,
         out_dir=tmp_path / "run",
         obs_len=9,
     )
-    (tmp_path / "run" / "toy.metrics.json").write_text("{}")
+    (tmp_path / "run" / f"{name}.metrics.json").write_text(metrics)
     return weights
 
 

@@ -12,9 +12,9 @@ from predictors import models
 from predictors.data.prepare import prepare_ewap
 from predictors.models import PLUGINS_ENV
 from tests.cli_calls import run_cli as run
+from tests.pipelines.test_cli_plugins import TOY, _toy_checkpoint
 from tests.predictors.samples import write_tiny_ewap
 
-TOY = "tests.plugins.toy_predictor:ToyNet"
 NOTE = (
     "note: 'toy_quick' trained on 1 batch an epoch (train --limit-batches 1): a quick check, not a trained "
     "model (zoo list: *)"
@@ -36,19 +36,7 @@ def _private_cache(tmp_path_factory, monkeypatch):
 
 def _quick_check_in_the_zoo(tmp_path: Path) -> None:
     """toy_quick in the user zoo: the toy plugin's net, recorded as trained with --limit-batches 1."""
-    from predictors.checkpoint import save_checkpoint
-    from predictors.models import load_plugin
-
-    kind = load_plugin(TOY)
-    (tmp_path / "run").mkdir()
-    weights, _ = save_checkpoint(
-        kind.build_net(kind.config({"hidden_dim": 4})),
-        model=TOY,
-        name="toy_quick",
-        out_dir=tmp_path / "run",
-        obs_len=9,
-    )
-    (tmp_path / "run" / "toy_quick.metrics.json").write_text('{"training": {"limit_batches": 1}}')
+    weights = _toy_checkpoint(tmp_path, "toy_quick", '{"training": {"limit_batches": 1}}')
     assert main(["--plugin", TOY, "zoo", "add", str(weights)]) == 0
 
 
