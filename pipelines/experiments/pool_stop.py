@@ -22,10 +22,11 @@ goes on too: mpc.compiler.ended_after_cleanup asks the handler (its ``holds``) b
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from types import FrameType
 from typing import Any, Final, TypeVar
 
@@ -68,6 +69,8 @@ class PoolStop:
 _shared: Any = None  # the worker's: its pool's PoolStop.shared
 _running = False  # the worker's: an episode runs
 _held: int | None = None  # the worker's: the signal it holds
+_counting = False  # the worker's: its main thread holds the shared lock (``_counts``)
+_deferred: list[int] = []  # the worker's: a SIGTERM or SIGHUP that came meanwhile
 
 
 def take_part(shared: Any) -> None:
@@ -83,18 +86,35 @@ def run_unless_stopped(run: Callable[[], _T]) -> _T:
     if _held is not None:  # its episode back, the worker ends when HOLD_S is up or the driver ends it
         while True:  # not NotStarted: a worker signalled alone would take every task the pool hands it
             time.sleep(HOLD_S)
-    with _shared.get_lock():
-        counts = _shared.get_obj()
+    with _counts() as counts:
         if counts[_STOPPING]:
             raise NotStarted("the sweep stopped before this episode started")
         counts[_RUNNING] += 1
-    _running = True
+        _running = True  # in the block: a signal taken as it ends finds the episode begun, and holds
     try:
         return run()
     finally:
         _running = False
+        with _counts() as counts:
+            counts[_RUNNING] -= 1
+
+
+@contextlib.contextmanager
+def _counts() -> Iterator[Any]:
+    """The shared integers, locked; a SIGTERM or SIGHUP that comes meanwhile is taken once the lock is free:
+    its default action, taken inside, ended the worker holding the lock, and the other workers and the
+    driver's stop (``PoolStop.stop``) then waited on it for ever. (Blocking the signals would not do: one
+    sent to the process reaches another of its threads, and Python runs the handler in this one.)"""
+    global _counting
+    assert _shared is not None, "pool worker used before its initializer ran"
+    _counting = True
+    try:
         with _shared.get_lock():
-            _shared.get_obj()[_RUNNING] -= 1
+            yield _shared.get_obj()
+    finally:
+        _counting = False
+        while _deferred:  # in order: a second one ends the worker, as it would have outside
+            _on_stop_signal(_deferred.pop(0), None)
 
 
 _STOP_SIGNALS: Final[tuple[signal.Signals, ...]] = tuple(
@@ -126,6 +146,9 @@ def _holds(signum: int) -> bool:
 
 
 def _on_stop_signal(signum: int, frame: FrameType | None) -> None:
+    if _counting:  # taken as the lock is released (_counts)
+        _deferred.append(signum)
+        return
     if not _holds(signum):  # the default action, now: the worker ends as it was told to
         signal.signal(signum, signal.SIG_DFL)
         signal.raise_signal(signum)
