@@ -14,11 +14,12 @@ A SIGTERM or SIGHUP sent to the sweep's whole process group (`timeout 30 crowdmp
 terminal) reached the workers too, whose default action ended them at once: the episodes they ran were cut,
 where a signal to the driver alone let them finish within the stop's wait (sweep_stop) and recorded them.
 Ignoring the signals would not do: the pool's own clean-up of a broken pool ends its workers by SIGTERM and
-joins them without a bound. So a worker holds the first one while it runs an episode (``hold_stop_signals``):
-the episode goes on, and the worker starts no other; it ends at once once the driver has said it closes the
-pool (``PoolStop.close``, then SIGTERM and, past a bound, SIGKILL), at a second signal, with no episode
-running, or ``HOLD_S`` after the signal, which the driver's wait ends before. A jit compile in the episode
-goes on too: mpc.compiler.ended_after_cleanup asks the handler (its ``holds``) before it stops the compile."""
+joins them without a bound. So a worker holds the first one (``hold_stop_signals``), idle too (ended, it
+broke the pool, and the break failed the futures of the episodes the others ran): the episode it runs goes
+on, and it starts no other; it ends at once once the driver has said it closes the pool (``PoolStop.close``,
+then SIGTERM and, past a bound, SIGKILL), at a second signal, or ``HOLD_S`` after the signal, which the
+driver's wait ends before. A jit compile in the episode goes on too: mpc.compiler.ended_after_cleanup asks
+the handler (its ``holds``) before it stops the compile."""
 
 from __future__ import annotations
 
@@ -67,7 +68,6 @@ class PoolStop:
 
 
 _shared: Any = None  # the worker's: its pool's PoolStop.shared
-_running = False  # the worker's: an episode runs
 _held: int | None = None  # the worker's: the signal it holds
 _counting = False  # the worker's: its main thread holds the shared lock (``_counts``)
 _deferred: list[int] = []  # the worker's: a SIGTERM or SIGHUP that came meanwhile
@@ -81,20 +81,18 @@ def take_part(shared: Any) -> None:
 
 def run_unless_stopped(run: Callable[[], _T]) -> _T:
     """``run()``, counted as running while it runs; NotStarted once the driver has said the pool stops."""
-    global _running
-    assert _shared is not None, "pool worker used before its initializer ran"
-    if _held is not None:  # its episode back, the worker ends when HOLD_S is up or the driver ends it
-        while True:  # not NotStarted: a worker signalled alone would take every task the pool hands it
-            time.sleep(HOLD_S)
     with _counts() as counts:
         if counts[_STOPPING]:
             raise NotStarted("the sweep stopped before this episode started")
-        counts[_RUNNING] += 1
-        _running = True  # in the block: a signal taken as it ends finds the episode begun, and holds
+        held = _held is not None  # read in the block: a signal taken as it ends holds for the episode begun
+        if not held:
+            counts[_RUNNING] += 1
+    if held:  # signalled, not by the sweep's stop: the worker ends when HOLD_S is up or the driver ends it
+        while True:  # not NotStarted: a worker signalled alone would take every task the pool hands it
+            time.sleep(HOLD_S)
     try:
         return run()
     finally:
-        _running = False
         with _counts() as counts:
             counts[_RUNNING] -= 1
 
@@ -124,17 +122,18 @@ _STOP_SIGNALS: Final[tuple[signal.Signals, ...]] = tuple(
 
 def hold_stop_signals() -> None:
     """In a pool's worker, as it starts: SIGTERM and SIGHUP, where their default action is in force (SIGHUP
-    under nohup stays ignored), are held while an episode runs (the module's docstring says how)."""
+    under nohup stays ignored), are held (the module's docstring says how)."""
     for signum in _STOP_SIGNALS:
         if signal.getsignal(signum) is signal.SIG_DFL:
             signal.signal(signum, _on_stop_signal)
 
 
 def _holds(signum: int) -> bool:
-    """Whether the worker holds ``signum`` now (the first, during an episode, the pool not closing); once it
-    does, the same signal comes again HOLD_S later, to the main thread, and ends it."""
+    """Whether the worker holds ``signum`` now (the first, the pool not closing; idle too: one that ended
+    broke the pool, whose break failed the futures of the episodes the other workers ran, held to finish);
+    once it does, the same signal comes again HOLD_S later, to the main thread, and ends it."""
     global _held
-    if _held is not None or not _running or _shared is None or _shared.get_obj()[_CLOSING]:
+    if _held is not None or _shared is None or _shared.get_obj()[_CLOSING]:
         return False
     _held = signum
     main = threading.main_thread().ident

@@ -1,11 +1,11 @@
 """The process pool's backend: K spawned processes of a ``concurrent.futures`` pool run the sweep's episodes
 (pipelines.experiments.backends picks it when Ray is not installed, or for ``--backend process``).
 
-What it holds: the pool's workers (one EpisodeWorker each, ignoring Ctrl-C, holding a SIGTERM or SIGHUP while
-an episode runs (pool_stop), exiting with a killed driver), the environment they start with (pool_spawn), the
-resource tracker started (pool_tracker), and the break handling: a worker
-process that dies breaks the whole pool, each episode in flight becomes an episode error, a new pool runs the
-rest, and the sweep stops (SweepStopped) when the pool keeps breaking with nothing finishing."""
+What it holds: the pool's workers (one EpisodeWorker each, ignoring Ctrl-C, holding a SIGTERM or SIGHUP until
+the driver ends them (pool_stop), exiting with a killed driver), the environment they start with (pool_spawn),
+the resource tracker started (pool_tracker), and the break handling: a worker process that dies breaks the
+whole pool, each episode in flight becomes an episode error, a new pool runs the rest, and the sweep stops
+(SweepStopped) when the pool keeps breaking with nothing finishing."""
 
 from __future__ import annotations
 

@@ -409,3 +409,50 @@ def test_a_signal_to_the_sweeps_process_group_lets_the_workers_finish(sent, stat
         "marks_then_takes_three_seconds_too",
     ], err
     assert "interrupted: rerun the same command to resume" in err.splitlines(), err
+
+
+def test_a_signal_to_the_process_group_with_a_worker_idle_keeps_the_running_episode(tmp_path):
+    """The sweep's last episodes, a worker idle beside one running an episode (`--workers 2`, two episodes,
+    one of them back at once): a SIGTERM to the group ended the idle worker at once, which broke the pool,
+    and the pool's break failed the running episode's future: the episode, held to finish, was lost."""
+    import subprocess
+    import sys
+
+    marks = tmp_path / "marks"
+    marks.mkdir()
+    out = tmp_path / "out"
+    names = (
+        "tests.plugins.toy_controller:StraightLine",
+        "tests.plugins.failing_controllers:MarksThenTakesThreeSeconds",
+    )
+    env = os.environ | {"CROWDMPC_TEST_MARKS": str(marks), "CROWDMPC_CONTROLLERS": ",".join(names)}
+    start = time.monotonic()
+    sweep = subprocess.Popen(
+        [sys.executable, "-m", "pipelines.cli", *_sweep(out, list(names), "process")],
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # a process group of its own, as a terminal's job has
+        preexec_fn=_stop_signals_by_default,
+    )
+    log = out / EPISODES_FILE
+
+    def idle() -> bool:  # the straight line's episode recorded, the other's begun
+        return any(marks.iterdir()) and log.exists() and "straight_line" in log.read_text()
+
+    try:
+        while not idle() and time.monotonic() - start < 120:
+            assert sweep.poll() is None, sweep.stderr.read() if sweep.stderr else ""
+            time.sleep(0.05)
+        os.killpg(sweep.pid, signal.SIGTERM)
+        _, err = sweep.communicate(timeout=60)
+    finally:
+        if sweep.poll() is None:
+            os.killpg(sweep.pid, signal.SIGKILL)
+            sweep.wait()
+    assert sweep.returncode == 143, err
+    records = EpisodeLog(out / EPISODES_FILE).load()
+    assert sorted(r["controller"] for r in records.values()) == [
+        "marks_then_takes_three_seconds",
+        "straight_line",
+    ], err
