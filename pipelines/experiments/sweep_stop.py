@@ -16,8 +16,8 @@ end (`sweep --workers 2` on Table II with constant velocity, episodes of about a
 running). Now it says so and waits for them, as at any other stop; a second interrupt ends the wait at
 once (raised inside ``finished``), and the line that asks for a rerun counts the episodes cut. A
 SIGTERM or SIGHUP sent to the sweep's whole process group (`timeout`, a closed terminal) reaches the process
-pool's workers as well: each holds it while its episode runs, so that they finish within the wait as at a
-signal to the driver alone, and the driver then ends them (pipelines.experiments.pool_stop).
+pool's workers as well: each holds the first (idle too), finishes the episode it runs and starts no other, as
+at a signal to the driver alone, and the driver then ends them (pipelines.experiments.pool_stop).
 """
 
 from __future__ import annotations
