@@ -23,7 +23,6 @@ from pipelines.experiments.log import (
     SWEEP_FILE,
     EpisodeLog,
     episode_log,
-    error_keys,
 )
 from pipelines.experiments.report import CELLS_CSV, TABLE_MD
 from pipelines.experiments.sweep import run_sweep
@@ -232,15 +231,6 @@ def test_a_deeply_nested_record_is_named_by_file_and_line(good, tmp_path, capsys
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{out / EPISODES_FILE}:2: not a JSON record (" in err[0]
     assert err[0].endswith("the file is damaged: edit out that line (a copy kept) and its episode runs again")
-
-
-def test_a_deeply_nested_error_entry_is_passed_over(good, tmp_path, capsys):
-    """errors.jsonl only orders a rerun's episodes: a line that is no entry is passed over, this one too."""
-    out = tmp_path / "sweep"
-    shutil.copytree(good, out)
-    (out / ERRORS_FILE).write_bytes(b'{"key": "x"}\n' + DEEP)
-    assert error_keys(out) == {"x"}
-    assert main([*ARGV, "--out", str(out)]) == 0
 
 
 @pytest.mark.parametrize(

@@ -8,20 +8,17 @@ from pathlib import Path
 import pytest
 
 from pipelines.cli import main
-from pipelines.experiments.cells import get_experiment
 from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, SWEEP_FILE, error_keys
 from pipelines.experiments.sweep import run_sweep
-from pipelines.experiments.sweep_config import SweepConfig
+from tests.pipelines.test_sweep_hostile import ARGV, DEEP, _config
 
-ARGV = ["sweep", "--experiment", "baselines", "--humans", "3", "--episodes-per-cell", "1", "--backend",
-        "inline", "--no-progress", "--jit", "off"]  # fmt: skip
 LONG = b'{"key": "x", "seed": 1' + b"0" * 5000 + b"}\n"  # int("1000...") past sys.get_int_max_str_digits()
 
 
 @pytest.fixture(scope="module")
 def good(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("good")
-    run_sweep(SweepConfig(get_experiment("baselines"), out, 1, humans=(3,), backend="inline", progress=False))
+    run_sweep(_config(out))
     return out
 
 
@@ -63,11 +60,12 @@ def test_such_a_last_line_is_cut_off_and_kept_as_a_torn_one_is(good, tmp_path, c
     assert (out / (EPISODES_FILE + ".cut")).read_bytes() == LONG
 
 
-def test_such_an_error_entry_is_passed_over(good, tmp_path):
+@pytest.mark.parametrize("line", [LONG, DEEP], ids=["long_int", "deeply_nested"])
+def test_such_an_error_entry_is_passed_over(good, tmp_path, line):
     """errors.jsonl only orders a rerun's episodes: a line that is no entry is passed over, this one too."""
     out = tmp_path / "sweep"
     shutil.copytree(good, out)
-    (out / ERRORS_FILE).write_bytes(b'{"key": "y"}\n' + LONG)
+    (out / ERRORS_FILE).write_bytes(b'{"key": "y"}\n' + line)
     assert error_keys(out) == {"y"}
     assert main([*ARGV, "--out", str(out)]) == 0
 
