@@ -270,11 +270,17 @@ def test_an_encoder_padded_at_the_ends_is_computed_at_the_padded_positions_too()
     ids=["integer_mask", "causal_without_a_mask", "width", "encoder_integer_mask", "encoder_causal"],
 )
 def test_what_torch_refuses_is_refused_in_one_line_naming_the_argument(module, call, message):
-    wrapped = Wrap(call, enc=module()).double().eval()
+    assert_refused_as_torch(Wrap(call, enc=module()), "enc", message)
+
+
+def assert_refused_as_torch(wrapped: nn.Module, name: str, message: str) -> None:
+    """``wrapped`` (a Wrap holding the layer as ``name``), which torch refuses on a (2, 3, 4) input, is
+    refused by the export in one line matching ``message`` and naming the module."""
+    wrapped = wrapped.double().eval()
     x = randn(2, 3, 4)
     with pytest.raises((RuntimeError, AssertionError)):
         wrapped(x.clone().requires_grad_())
-    with pytest.raises(ExportError, match=message + r".*\(in module 'enc'\)") as info:
+    with pytest.raises(ExportError, match=message + rf".*\(in module '{name}'\)") as info:
         export_function(wrapped, wrapped.forward, [TensorSpec("x", tuple(x.shape))], ["y"], "f")
     assert "\n" not in str(info.value)
 
